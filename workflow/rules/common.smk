@@ -1,0 +1,20 @@
+# Shared settings: the active profile's workflow config and helpers for calling Hydra apps.
+import yaml
+from pathlib import Path
+
+PROFILE = config.get("profile", "quick")
+_profile_file = Path("conf/workflow") / f"{PROFILE}.yaml"
+if not _profile_file.exists():
+    raise ValueError(f"unknown profile '{PROFILE}': {_profile_file} does not exist")
+for _key, _value in yaml.safe_load(_profile_file.read_text()).items():
+    config.setdefault(_key, _value)  # command-line --config wins
+
+PY = "python -m"
+REF = "data/reference"
+PHOTOS = f"{REF}/photos/flat-tip"
+VIDEOS = f"{REF}/videos"
+
+
+def hydra_dir(path):
+    """Pin Hydra's run folder next to a rule's output so .hydra/config.yaml stays with it."""
+    return f"hydra.run.dir={Path(path).parent} hydra.output_subdir=.hydra/{Path(path).stem}"
