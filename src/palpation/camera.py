@@ -41,7 +41,8 @@ class Fisheye:
         norm = np.linalg.norm(p, axis=-1)
         if np.any(norm == 0):
             raise ValueError("cannot project a point at the lens centre (|p| = 0)")
-        theta = np.arccos(np.clip(p[..., 2] / norm, -1.0, 1.0))
+        # atan2 keeps full precision near the axis, where arccos(z/|p|) loses ~1e-8 rad (4e-6 px)
+        theta = np.arctan2(np.hypot(p[..., 0], p[..., 1]), p[..., 2])
         phi = np.arctan2(p[..., 1], p[..., 0])
         r = self.f_px * theta
         return np.stack([self.cx_px + r * np.cos(phi), self.cy_px + r * np.sin(phi)], axis=-1)

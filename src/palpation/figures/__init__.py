@@ -1,0 +1,1 @@
+"""Figures: one module per figure; drawing functions take `ax` first."""

@@ -1,0 +1,1 @@
+"""Real datasets (Silicone, Meat) rebuilt from the shipped reference videos."""
