@@ -1,12 +1,28 @@
 # ViTacTip sliding palpation: the whole paper as one DAG. Rules live in workflow/rules/<stage>.smk.
-#   snakemake --cores 2                    quick profile (CPU, minutes)
-#   snakemake --workflow-profile workflow/profiles/paper   paper profile (one H100)
+#   snakemake --cores 2                                      quick profile (CPU, the default)
+#   snakemake --workflow-profile workflow/profiles/paper     paper profile (one GPU)
+#   snakemake --cores 2 bench                                benchmark JSONs under results/bench/
 
 
 include: "workflow/rules/common.smk"
+include: "workflow/rules/photos.smk"
+include: "workflow/rules/silicone.smk"
+include: "workflow/rules/meat.smk"
+include: "workflow/rules/twin.smk"
+include: "workflow/rules/simulate.smk"
 
 
 rule all:
     default_target: True
     input:
-        [],
+        rules.measured_photos.output,
+        rules.silicone_set.output,
+        rules.silicone_check.output,
+        rules.meat_set.output,
+        rules.data_summary.output,
+        rules.render_twin.output,
+
+
+rule bench:
+    input:
+        rules.bench_twin.output,
