@@ -1,0 +1,161 @@
+"""Hydra entry point: the real Silicone set (task=set) or its label cross-check (task=check).
+
+task=set   -> `out.npz` (markers (10, 16, 127, 2) sensor px, found, source, labels, dots, ...),
+              `out.json` (source file, states, frame indices, sweeps, counts, step statistics) and the
+              overview figure. Everything is computed before the first file is written.
+task=check -> `out.agreement`: per-state agreement of the labels in `out.npz` with the Ground Truth
+              panel of the A-to-B prediction viewer; fails if the mean is below `min_agreement`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import logging
+from pathlib import Path
+
+import hydra
+import numpy as np
+from omegaconf import DictConfig, OmegaConf
+
+from palpation.camera import video_to_sensor_px
+from palpation.io import save_figure, save_json, save_npz
+from palpation.markers.template import rest_template
+from palpation.realdata import silicone as sil
+from palpation.realdata.silicone_check import check_labels
+from palpation.realdata.video import read_states
+
+log = logging.getLogger(__name__)
+
+
+def run(cfg: DictConfig) -> dict:
+    if cfg.task == "set":
+        return _build(cfg)
+    if cfg.task == "check":
+        return _check(cfg)
+    raise ValueError(f"unknown task '{cfg.task}' in conf/silicone.yaml: use task=set or task=check")
+
+
+def _build(cfg: DictConfig) -> dict:
+    params = sil.SiliconeParams(**OmegaConf.to_container(cfg.detector, resolve=True))
+    video = Path(cfg.video)
+    template = rest_template(cfg.template_photo)
+    data = sil.build_silicone_set(video, list(cfg.videos), int(cfg.n_frames), params, template)
+    meta = metadata(data, video, params)
+    fig = overview_figure(data, video, [tuple(x) for x in cfg.overview]) if cfg.figure else None
+
+    save_npz(cfg.out.npz, **data)
+    save_json(cfg.out.json, meta)
+    if fig is not None:
+        import matplotlib.pyplot as plt
+
+        save_figure(fig, cfg.out.figure)
+        plt.close(fig)
+    s = meta["summary"]
+    log.info("markers: %d detected (%d blob, %d masked fit), %d filled; frames by detected count %s",
+             s["detected"], s["detected_blob"], s["detected_masked_fit"], s["filled"],
+             s["frames_by_detected_count"])
+    log.info("steps (orig px): %s; similarity scale %s", s["step_px"], s["similarity_scale"])
+    log.info("dots %d %s in %d states; %d positive marker-frames in %d states (rate %.4f); central "
+             "frames %d / %d = %.4f", s["dots"], s["dots_by_colour"], s["states_with_dots"],
+             s["positive_marker_frames"], s["states_with_positives"], s["positive_rate"],
+             s["central_positives"], s["central_nodes"], s["central_positive_rate"])
+    if cfg.track:
+        _track(cfg, "silicone", {f"silicone/{k}": v for k, v in s.items() if np.isscalar(v)}
+               | {f"silicone/step_px_{k}": v for k, v in s["step_px"].items()})
+    return meta
+
+
+def _check(cfg: DictConfig) -> dict:
+    with np.load(cfg.out.npz) as data:
+        markers, labels, distance = data["markers"], data["labels"], data["chord_distance_px"]
+    if markers.shape[:2] != (sil.N_VIDEOS, sil.N_FRAMES):
+        raise ValueError(f"{cfg.out.npz}: the check needs the full set (10 videos x 16 frames), got "
+                         f"{markers.shape[:2]}; rebuild it with task=set and the default videos")
+    result = check_labels(markers, labels, cfg.prediction_video, chord_distance=distance)
+    log.info("label agreement with the panel: mean %.4f %%, min %.4f %%, %d vs %d panel positives",
+             100 * result["mean_agreement"], 100 * result["min_agreement"], result["our_positives"],
+             result["panel_positives"])
+    if result["mean_agreement"] < cfg.min_agreement:
+        raise ValueError(f"label agreement {result['mean_agreement']:.4f} is below min_agreement "
+                         f"{cfg.min_agreement}; inspect the per-state list before writing anything")
+    save_json(cfg.out.agreement, result)
+    if cfg.track:
+        _track(cfg, "silicone_check", {"silicone/agreement_mean": result["mean_agreement"],
+                                       "silicone/agreement_min": result["min_agreement"]})
+    return result
+
+
+def metadata(data: dict, video: Path, params: sil.SiliconeParams) -> dict:
+    """JSON side-car: provenance, state indexing, sweeps and the summary numbers."""
+    videos = [int(v) for v in data["videos"]]
+    return {
+        "source": str(video), "source_sha256": hashlib.sha256(video.read_bytes()).hexdigest(),
+        "n_videos": len(videos), "n_frames": int(data["states"].shape[1]), "n_markers": sil.N_MARKERS,
+        "state_rule": "state s = video s//16 + 1, frame s%16 + 1; read video frame 5s + 4",
+        "videos": [{"video": v, "sweep": sil.SWEEP_NAMES[v - 1], "line_angle_deg": sil.LINE_ANGLE_DEG[v - 1],
+                    "states": data["states"][k].tolist(), "frame_index": data["frame_index"][k].tolist()}
+                   for k, v in enumerate(videos)],
+        "arrays": {"markers": "sensor px (1920x1080), base-graph order",
+                   "found": "detected in this frame (blob or masked fit); False = filled from neighbours",
+                   "source": "0 filled, 1 clear blob, 2 masked fit of a marker partly under a dot",
+                   "labels": "1 iff < 30 px from a chord sample of a dot of the same frame",
+                   "chord_distance_px": "distance to the nearest chord sample (inf: no dot)",
+                   "dots": "dot centres, sensor px, NaN-padded to 4; dot_colours indexes dot_colours_names"},
+        "dot_colours_names": list(sil.DOT_COLOURS),
+        "params": dataclasses.asdict(params),
+        "summary": sil.summarize(data),
+    }
+
+
+def overview_figure(data: dict, video: Path, pairs: list[tuple[int, int]]):
+    """A few frames with markers coloured by label (hollow = filled), dots and their chords."""
+    import matplotlib.pyplot as plt
+
+    videos = [int(v) for v in data["videos"]]
+    pairs = [(v, f) for v, f in pairs if v in videos and f <= data["states"].shape[1]]
+    frames = read_states(video, states=[sil.state_index(v, f) for v, f in pairs])
+    ncol = 3
+    nrow = max(1, -(-len(pairs) // ncol))
+    fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 4.2 * nrow), squeeze=False)
+    (x0, y0), (x1, y1) = video_to_sensor_px([[0, 0], [1280, 760]])
+    for ax, (v, f), frame in zip(axes.ravel(), pairs, frames):
+        k, t = videos.index(v), f - 1
+        ax.imshow(frame[..., ::-1], extent=(x0, x1, y1, y0), interpolation="bilinear")
+        _draw_state(ax, data, k, t)
+        ax.set_title(f"video {v} ({sil.SWEEP_NAMES[v - 1]}), frame {f}", fontsize=9)
+    for ax in axes.ravel():
+        ax.set_xlim(640, 1440), ax.set_ylim(984, 184), ax.set_xticks([]), ax.set_yticks([])
+    fig.suptitle("Silicone set: markers by label (magenta 1, cyan 0, hollow = filled), dots and chords")
+    fig.tight_layout()
+    return fig
+
+
+def _draw_state(ax, data: dict, k: int, t: int) -> None:
+    markers, labels, source = data["markers"][k, t], data["labels"][k, t], data["source"][k, t]
+    colour = np.where(labels[:, None] == 1, [[0.9, 0.0, 0.9]], [[0.0, 0.8, 0.9]])
+    shown = source > sil.SOURCE_FILLED
+    ax.scatter(*markers[shown].T, s=9, c=colour[shown], linewidths=0)
+    ax.scatter(*markers[~shown].T, s=30, facecolors="none", edgecolors=colour[~shown], linewidths=1.2,
+               zorder=4)  # filled markers lie under a dot: draw them on top
+    for dot, c in zip(data["dots"][k, t, :data["dot_counts"][k, t]], data["dot_colours"][k, t]):
+        chord = sil.chord_samples(dot, float(data["line_angle_deg"][k]))
+        if chord is not None:
+            ax.plot(*chord.T, color="yellow", lw=0.8, alpha=0.8)
+        ax.scatter(*dot, s=60, c=sil.DOT_COLOURS[c], edgecolors="black", linewidths=1.0, zorder=3)
+
+
+def _track(cfg: DictConfig, stage: str, metrics: dict) -> None:
+    from palpation.tracking import log_metrics, start_run
+
+    with start_run(stage, params=OmegaConf.to_container(cfg, resolve=True)):
+        log_metrics(metrics)
+
+
+@hydra.main(version_base="1.3", config_path="../../../conf", config_name="silicone")
+def main(cfg: DictConfig) -> None:
+    run(cfg)
+
+
+if __name__ == "__main__":
+    main()

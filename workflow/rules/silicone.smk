@@ -1,0 +1,40 @@
+# The real Silicone set rebuilt from the annotation video (SPEC §13.4), and the cross-check of its
+# labels against the A-to-B prediction viewer's Ground Truth panel (SPEC §13.5).
+# Needs common.smk (PY, PHOTOS, VIDEOS, hydra_dir).
+
+
+rule silicone_set:
+    input:
+        video=f"{VIDEOS}/dataset_annotations_silicone.mp4",
+        rest_photo=f"{PHOTOS}/sensor_default_state.png",
+        config="conf/silicone.yaml",
+    output:
+        npz="results/data/silicone/silicone.npz",
+        json="results/data/silicone/silicone.json",
+        png=report("results/data/silicone/silicone_overview.png", category="Real data"),
+        pdf="results/data/silicone/silicone_overview.pdf",
+    params:
+        hydra=lambda wildcards, output: hydra_dir(output.npz),
+        figure=lambda wildcards, output: output.png[: -len(".png")],
+    log:
+        "results/logs/data/silicone_set.log",
+    shell:
+        "{PY} palpation.apps.silicone task=set video={input.video} template_photo={input.rest_photo}"
+        " out.npz={output.npz} out.json={output.json} out.figure={params.figure}"
+        " {params.hydra} > {log} 2>&1"
+
+
+rule silicone_check:
+    input:
+        npz=rules.silicone_set.output.npz,
+        video=f"{VIDEOS}/predictions_sim_to_silicone.mp4",
+        config="conf/silicone.yaml",
+    output:
+        json="results/data/silicone/label_agreement.json",
+    params:
+        hydra=lambda wildcards, output: hydra_dir(output.json),
+    log:
+        "results/logs/data/silicone_check.log",
+    shell:
+        "{PY} palpation.apps.silicone task=check out.npz={input.npz} prediction_video={input.video}"
+        " out.agreement={output.json} {params.hydra} > {log} 2>&1"
