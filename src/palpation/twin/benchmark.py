@@ -1,0 +1,120 @@
+"""Twin throughput: substeps/s and slides/hour for batches of N envs at each mesh resolution.
+
+Times the whole pipeline of a slide batch (FEM substeps, contact, per-frame marker extraction) with
+`run_batch`, and adds the bare FEM core and its roofline fraction (`twin.bench.time_substeps`).
+A batch is run twice, for `k` and for 1 frame; the difference gives the time per frame
+free of setup and compilation, and a full 398-frame slide batch is estimated as
+setup + 398 x per-frame. Where k < 398 the record says so (`extrapolated_from_frames`); on the
+2-core CPU k is chosen so that each point stays within `--budget-s`.
+
+    python -m palpation.twin.benchmark --device cpu --out results/bench/twin.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import warp as wp
+
+from palpation.io import save_json
+from palpation.tracking import git_commit
+from palpation.twin.bench import time_substeps
+from palpation.twin.config import TwinConfig
+from palpation.twin.markers import bind_markers
+from palpation.twin.mesh import SensorMesh
+from palpation.twin.runner import EnvRequest, run_batch
+from palpation.twin.trajectory import plan_trajectory
+
+log = logging.getLogger(__name__)
+SLIDE_FRAMES = plan_trajectory("slide").n_frames  # 398
+
+
+def slide_requests(n: int, seed: int = 0) -> list[EnvRequest]:
+    """n slides, half over the vessel, headings drawn as in SPEC §7 (contact work is realistic)."""
+    rng = np.random.default_rng(seed)
+    return [EnvRequest(kind="slide", heading_offset_deg=float(rng.uniform(-15, 15)), vessel=i % 2 == 0,
+                       name=f"bench_{i:04d}") for i in range(n)]
+
+
+def timed_batch(mesh, cfg, reqs, binding, device, frames: int) -> float:
+    start = time.perf_counter()
+    run_batch(mesh, cfg, reqs, binding=binding, device=device, progress=False, max_frames=frames)
+    wp.synchronize_device(device)
+    return time.perf_counter() - start
+
+
+def bench_point(mesh: SensorMesh, cfg: TwinConfig, n_envs: int, device: str, max_frames: int,
+                budget_s: float) -> dict:
+    """One record: time per frame from two batch runs, extrapolated to a full slide batch."""
+    from palpation.markers.template import rest_template
+
+    binding = bind_markers(mesh.nodes, mesh.dome_nodes, rest_template())
+    reqs = slide_requests(n_envs)
+    timed_batch(mesh, cfg, reqs[:1], binding, device, 1)  # compile/load kernels outside the timing
+    t1 = timed_batch(mesh, cfg, reqs, binding, device, 1)
+    t2 = timed_batch(mesh, cfg, reqs, binding, device, 2)
+    per_frame = max(t2 - t1, 1e-9)
+    setup = max(t1 - per_frame, 0.0)
+    # as many frames as the budget allows (at least 2), capped by a full slide
+    k = int(min(max_frames, SLIDE_FRAMES, max(2, budget_s / per_frame)))
+    if k > 2:
+        tk = timed_batch(mesh, cfg, reqs, binding, device, k)
+        per_frame = (tk - t1) / (k - 1)
+    wall = setup + per_frame * SLIDE_FRAMES
+    substeps = cfg.integrator.substeps
+    rec = {"device": _device_name(device), "resolution": mesh.resolution, "n_envs": n_envs,
+           "frames": SLIDE_FRAMES, "substeps_per_s": substeps / per_frame,
+           "env_substeps_per_s": n_envs * substeps / per_frame, "wall_s": wall,
+           "trajectories_per_hour": n_envs * 3600.0 / wall, "setup_s": setup,
+           "nodes": mesh.n_nodes, "tets": mesh.n_tets, "commit": git_commit()}
+    if k < SLIDE_FRAMES:
+        rec["extrapolated_from_frames"] = k
+    # the bare FEM core (no markers, no host reads) and its memory-bandwidth roofline
+    cuda = wp.get_device(device).is_cuda
+    small = cuda or n_envs * mesh.n_tets <= 200_000  # a full frame of substeps is cheap enough
+    core = time_substeps(mesh, n_envs, n_substeps=124 if small else 16, device=device,
+                         cfg=TwinConfig(device=device), repeats=3 if cuda else 1)
+    rec["core_substeps_timed"] = 124 if small else 16
+    rec.update({"core_substeps_per_s": core["substeps_per_s"],
+                "roofline_substep_s": core["roofline_substep_s"], "roofline_fraction": core["roofline_fraction"],
+                "bandwidth_bytes_per_s": core["bandwidth_bytes_per_s"]})
+    log.info("%s", rec)
+    return rec
+
+
+def _device_name(device: str) -> str:
+    d = wp.get_device(device)
+    return f"cuda:{d.name}" if d.is_cuda else "cpu"
+
+
+def main(argv: list[str] | None = None) -> list[dict]:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--mesh-dir", type=Path, default=Path("results/twin"))
+    parser.add_argument("--resolutions", nargs="+", default=["coarse", "reference"])
+    parser.add_argument("--n-envs", nargs="+", type=int, default=[1, 8, 64, 500])
+    parser.add_argument("--device", default="cuda" if wp.is_cuda_available() else "cpu")
+    parser.add_argument("--max-frames", type=int, default=SLIDE_FRAMES, help="frames timed per point at most")
+    parser.add_argument("--budget-s", type=float, default=20.0,
+                        help="target seconds of timed frames per point")
+    parser.add_argument("--out", type=Path, default=Path("results/bench/twin.json"))
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s %(name)s %(message)s")
+    records = []
+    for res in args.resolutions:
+        mesh = SensorMesh.load(args.mesh_dir / f"mesh_{res}.npz")
+        for n in args.n_envs:
+            records.append(bench_point(mesh, TwinConfig(device=args.device), n, args.device,
+                                       args.max_frames, args.budget_s))
+            save_json(args.out, records)  # rewritten after each point: a long run keeps what it has
+    print(json.dumps(records, indent=1))
+    return records
+
+
+if __name__ == "__main__":
+    main()

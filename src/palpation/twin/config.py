@@ -1,0 +1,130 @@
+"""Typed configuration of the Warp twin (Hydra structured configs, SI units throughout).
+
+Every length is in metres, every force in newtons, in the world frame A of SPEC §1.3 scaled to
+physical size (a reference "sim" length is 5x the physical one, see `REF_LENGTH_SCALE`).
+
+The reference (DiffTactile-based) simulator ran at 5x length with E, rho, k_n, c_n unscaled. That is
+exactly the physical model with every lumped mass multiplied by 25 (`mass_scale=25`) and these
+coefficient maps (docs/twin.md derives them; `from_reference_units` applies them):
+    damping alpha: alpha_ref / 5      contact k_n, k_t: k_ref / 5      c_n, mu, beta: unchanged.
+The defaults are those reference-equivalent values; `conf/twin/physical.yaml` is true dynamics.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from hydra.core.config_store import ConfigStore
+
+REF_LENGTH_SCALE = 5.0  # reference sim length / physical length (SPEC §1.2)
+REF_K_N = 94908.307  # calibrated k_n of the reference, reference units (SPEC §3.3)
+REF_C_N = 100.0
+REF_ALPHA = 0.1  # reference damping alpha, reference units (SPEC §2.3)
+
+
+def from_reference_units(*, k_n: float | None = None, c_n: float | None = None,
+                         k_t: float | None = None, alpha: float | None = None) -> dict[str, float]:
+    """Map reference (x5 length) coefficients to the physical model with mass_scale=25."""
+    s = REF_LENGTH_SCALE
+    out = {"k_n": k_n / s if k_n is not None else None, "c_n": c_n,
+           "k_t": k_t / s if k_t is not None else None, "alpha": alpha / s if alpha is not None else None}
+    return {k: v for k, v in out.items() if v is not None}
+
+
+@dataclass
+class MeshConfig:
+    resolution: str = "coarse"  # name of the cached mesh: results/twin/mesh_{resolution}.npz
+    length_factor: float = 0.7  # gmsh Mesh.CharacteristicLengthFactor (reference 0.3)
+
+
+@dataclass
+class MaterialConfig:
+    E: float = 881400.0  # Pa (SPEC §2.3, calibrated)
+    nu: float = 0.497
+    rho: float = 1100.0  # kg/m^3
+    # "standard": mu, lambda from E, nu as the reference does (small-strain modulus then ~0.75 E
+    # at nu=0.497, docs/twin.md); "smith": Smith et al. 2018 re-parametrisation, small-strain E exact.
+    lame: str = "standard"
+
+
+@dataclass
+class DampingConfig:
+    alpha: float = REF_ALPHA / REF_LENGTH_SCALE  # N s/m per tet edge pair (reference 0.1 at x5 scale)
+    beta: float = 0.01  # fraction removed from the elastic force (SPEC §2.3)
+
+
+@dataclass
+class IntegratorConfig:
+    dt: float = 1e-5  # s, substep
+    substeps: int = 124  # per frame; frame = dt * substeps = 1.24 ms
+    mass_scale: float = 25.0  # 25 = reference-equivalent; 1 = physical (needs dt <= stable_dt)
+    zero_velocity_each_frame: bool = True  # reference quirk 10
+
+
+@dataclass
+class ContactConfig:
+    k_n: float = REF_K_N / REF_LENGTH_SCALE  # N/m, sensor-vessel normal stiffness
+    c_n: float = REF_C_N  # N s/m^2, multiplies the closing speed AND the depth (reference form)
+    k_t: float = 0.0  # N s/m, tangential (viscous) stiffness
+    mu: float = 0.0  # Coulomb friction coefficient
+    vessel: bool = True  # default for the per-env vessel switch
+    phantom_contact: bool = False  # sensor-phantom half-space contact (off in the reference)
+    k_s: float = 2.0e4  # N/m per node, phantom surface stiffness (only if phantom_contact)
+    c_s: float = 0.0  # N s/m^2, phantom surface damping (same form as c_n)
+    slip_eps: float = 1e-6  # m/s, no tangential force below this slip speed (reference 5e-6 sim)
+    rule: str = "sdf"  # "sdf": node vs analytic vessel SDF; "centroid": reference triangle rule
+
+
+@dataclass
+class SceneConfig:
+    phantom_top_z: float = 0.015  # m, world z of the phantom surface (SPEC §3.2: 0.075 sim)
+    vessel_radius: float = 0.002
+    vessel_length: float = 0.040
+    vessel_depth: float = 0.003  # axis below the phantom top
+    vessel_center_x: float = 0.039  # m, centre of the axis (SPEC §3.1: 0.195 sim)
+    vessel_center_y: float = 0.039
+
+
+@dataclass
+class HealthConfig:
+    max_abs_position: float = 2.0  # m (reference: |x| > 10 sim)
+    check_every: int = 1  # frames between health checks (reference: 20 in calibration)
+
+
+@dataclass
+class TwinConfig:
+    mesh: MeshConfig = field(default_factory=MeshConfig)
+    material: MaterialConfig = field(default_factory=MaterialConfig)
+    damping: DampingConfig = field(default_factory=DampingConfig)
+    integrator: IntegratorConfig = field(default_factory=IntegratorConfig)
+    contact: ContactConfig = field(default_factory=ContactConfig)
+    scene: SceneConfig = field(default_factory=SceneConfig)
+    health: HealthConfig = field(default_factory=HealthConfig)
+    device: str = "cpu"
+
+    @property
+    def frame_dt(self) -> float:
+        return self.integrator.dt * self.integrator.substeps
+
+    def validate(self) -> "TwinConfig":
+        if self.integrator.substeps < 1 or self.integrator.dt <= 0:
+            raise ValueError(f"twin.integrator: need dt > 0 and substeps >= 1, got {self.integrator}")
+        if not 0.0 < self.material.nu < 0.5:
+            raise ValueError(f"twin.material.nu={self.material.nu}: must lie in (0, 0.5)")
+        if self.material.lame not in ("standard", "smith"):
+            raise ValueError(f"twin.material.lame={self.material.lame!r}: use 'standard' or 'smith'")
+        if self.contact.rule not in ("sdf", "centroid"):
+            raise ValueError(f"twin.contact.rule={self.contact.rule!r}: use 'sdf' or 'centroid'")
+        if self.integrator.mass_scale <= 0:
+            raise ValueError(f"twin.integrator.mass_scale={self.integrator.mass_scale}: must be > 0")
+        return self
+
+
+def register_configs() -> None:
+    """Store the schemas so conf/twin/*.yaml can start with `defaults: [base_twin]`."""
+    cs = ConfigStore.instance()
+    cs.store(group="twin", name="base_twin", node=TwinConfig)
+    cs.store(group="twin/mesh", name="base_mesh", node=MeshConfig)
+
+
+register_configs()

@@ -1,0 +1,210 @@
+"""Markers bound to the dome surface, the projected vessel centreline and the label rule (SPEC §5, §7).
+
+A marker is not a mesh node: each rest marker of the real template is tied to the 5 dome-surface
+nodes whose rest projections lie nearest in the image, with inverse-distance weights, and each frame
+it is the weighted mean of those nodes' projections (pixels are averaged, not 3-D points).
+
+The per-frame projection runs as Warp kernels over (env, marker) and (env, centreline point), reading
+device-resident node positions and a device copy of the whole pose schedule, so a GPU run never
+round-trips through the host inside the frame loop. The numpy functions are the reference the tests
+compare the kernels against.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+from scipy.spatial import cKDTree
+
+from palpation.camera import DEFAULT_CAMERA, LENS_TO_TIP_MM, Fisheye
+
+LENS_TO_TIP_M = LENS_TO_TIP_MM * 1e-3  # camera E = body B + (0, 0, 19 mm)
+N_NEAREST = 5
+LABEL_RADIUS_PX = 30.0
+VESSEL_ORIGIN_M = np.array([0.095, 0.195, 0.060]) * 0.2  # SPEC §3.1, sim -> m
+VESSEL_LENGTH_M = 0.040
+N_CENTRELINE = 50
+
+
+@dataclass(frozen=True)
+class MarkerBinding:
+    """node_ix (127, k) mesh node indices, weights (127, k) summing to 1, rest_px (127, 2) bound rest."""
+
+    node_ix: np.ndarray
+    weights: np.ndarray
+    rest_px: np.ndarray
+    template_px: np.ndarray
+
+    @property
+    def residual_px(self) -> np.ndarray:
+        """(127,) distance between each bound rest marker and its template marker."""
+        return np.linalg.norm(self.rest_px - self.template_px, axis=1)
+
+
+def body_to_camera(points_B: np.ndarray) -> np.ndarray:
+    return np.asarray(points_B, dtype=np.float64) + np.array([0.0, 0.0, LENS_TO_TIP_M])
+
+
+def world_to_camera(points_A: np.ndarray, T_BA: np.ndarray) -> np.ndarray:
+    """(..., P, 3) world points and (..., 4, 4) poses -> camera-frame points (..., P, 3)."""
+    R, t = T_BA[..., :3, :3], T_BA[..., None, :3, 3]
+    points_B = np.einsum("...ji,...pj->...pi", R, np.asarray(points_A, dtype=np.float64) - t)
+    return body_to_camera(points_B)
+
+
+def bind_markers(nodes_B: np.ndarray, dome_nodes: np.ndarray, template_px: np.ndarray,
+                 camera: Fisheye = DEFAULT_CAMERA, k: int = N_NEAREST) -> MarkerBinding:
+    """Tie each template marker to its k nearest projected rest dome-surface nodes (SPEC §5.2)."""
+    dome_nodes = np.asarray(dome_nodes)
+    if len(dome_nodes) < k:
+        raise ValueError(f"marker binding needs at least {k} dome-surface nodes, "
+                         f"the mesh has {len(dome_nodes)}")
+    rest_node_px = camera.project(body_to_camera(np.asarray(nodes_B)[dome_nodes]))
+    dist, local = cKDTree(rest_node_px).query(np.asarray(template_px, dtype=np.float64), k=k)
+    inv = 1.0 / np.maximum(dist, 1e-9)  # a marker exactly on a node takes (almost) all its weight
+    weights = inv / inv.sum(axis=1, keepdims=True)
+    rest_px = np.einsum("mk,mkc->mc", weights, rest_node_px[local])
+    return MarkerBinding(node_ix=dome_nodes[local].astype(np.int32), weights=weights,
+                         rest_px=rest_px, template_px=np.asarray(template_px, dtype=np.float64))
+
+
+def project_markers_np(binding: MarkerBinding, nodes_A: np.ndarray, T_BA: np.ndarray,
+                       camera: Fisheye = DEFAULT_CAMERA) -> np.ndarray:
+    """Numpy reference: (n, N, 3) world nodes and (n, 4, 4) poses -> (n, 127, 2) marker pixels."""
+    nodes_A = np.asarray(nodes_A)
+    n, m, k = len(nodes_A), *binding.node_ix.shape
+    picked = nodes_A[:, binding.node_ix.reshape(-1)]  # (n, m*k, 3)
+    px = camera.project(world_to_camera(picked, T_BA)).reshape(n, m, k, 2)
+    return np.einsum("mk,nmkc->nmc", binding.weights, px)
+
+
+def centreline_A(n_points: int = N_CENTRELINE) -> np.ndarray:
+    """(50, 3) world points evenly spaced along the vessel axis, metres."""
+    s = np.linspace(0.0, 1.0, n_points)[:, None]
+    return VESSEL_ORIGIN_M + s * np.array([VESSEL_LENGTH_M, 0.0, 0.0])
+
+
+def project_points_np(points_A: np.ndarray, T_BA: np.ndarray, camera: Fisheye = DEFAULT_CAMERA) -> np.ndarray:
+    """(P, 3) world points through n camera poses (n, 4, 4) -> (n, P, 2) pixels."""
+    points = np.broadcast_to(points_A, (len(T_BA), *np.shape(points_A)))
+    return camera.project(world_to_camera(points, T_BA))
+
+
+def marker_labels(markers_px: np.ndarray, centreline_px: np.ndarray, contact: np.ndarray,
+                  radius_px: float = LABEL_RADIUS_PX) -> np.ndarray:
+    """SPEC §7: positive iff the frame has contact and the marker is < 30 px from the centreline.
+
+    markers (F, 127, 2), centreline (F, P, 2), contact (F,) -> (F, 127) int8.
+    """
+    d = np.linalg.norm(markers_px[:, :, None, :] - centreline_px[:, None, :, :], axis=-1).min(axis=2)
+    return ((d < radius_px) & np.asarray(contact, bool)[:, None]).astype(np.int8)
+
+
+# --- Warp kernels ---------------------------------------------------------------------------------
+
+@wp.struct
+class FisheyeParams:
+    f_px: float
+    cx_px: float
+    cy_px: float
+    lens_to_tip_m: float
+
+
+def fisheye_params(camera: Fisheye = DEFAULT_CAMERA) -> FisheyeParams:
+    p = FisheyeParams()
+    p.f_px, p.cx_px, p.cy_px, p.lens_to_tip_m = camera.f_px, camera.cx_px, camera.cy_px, LENS_TO_TIP_M
+    return p
+
+
+@wp.func
+def project_world(x: wp.vec3, T_AB: wp.mat44, cam: FisheyeParams) -> wp.vec2:
+    """World point -> body (inverse pose) -> camera E -> equidistant fisheye pixel."""
+    p = wp.transform_point(T_AB, x) + wp.vec3(0.0, 0.0, cam.lens_to_tip_m)
+    theta = wp.acos(wp.clamp(p[2] / wp.length(p), -1.0, 1.0))
+    phi = wp.atan2(p[1], p[0])
+    r = cam.f_px * theta
+    return wp.vec2(cam.cx_px + r * wp.cos(phi), cam.cy_px + r * wp.sin(phi))
+
+
+@wp.kernel
+def project_markers(
+    x: wp.array[wp.vec3],
+    n_nodes: int,
+    poses_AB: wp.array2d[wp.mat44],
+    frame: int,
+    node_ix: wp.array2d[wp.int32],
+    weights: wp.array2d[float],
+    cam: FisheyeParams,
+    first: wp.array[wp.int32],
+    end: wp.array[wp.int32],
+    markers: wp.array3d[wp.vec2],
+):
+    env, m = wp.tid()
+    if frame < first[env] or frame >= end[env]:  # outside this env's recorded window
+        return
+    T_AB = poses_AB[frame, env]
+    acc = wp.vec2(0.0, 0.0)
+    for j in range(node_ix.shape[1]):
+        acc += weights[m, j] * project_world(x[env * n_nodes + node_ix[m, j]], T_AB, cam)
+    markers[frame - first[env], env, m] = acc
+
+
+@wp.kernel
+def project_centreline(
+    points: wp.array[wp.vec3],
+    poses_AB: wp.array2d[wp.mat44],
+    frame: int,
+    cam: FisheyeParams,
+    first: wp.array[wp.int32],
+    end: wp.array[wp.int32],
+    out: wp.array3d[wp.vec2],
+):
+    env, p = wp.tid()
+    if frame < first[env] or frame >= end[env]:
+        return
+    out[frame - first[env], env, p] = project_world(points[p], poses_AB[frame, env], cam)
+
+
+class MarkerProjector:
+    """Device-side marker and centreline extraction for a batch of envs following a pose schedule.
+
+    `poses_BA` (F, n, 4, 4) is uploaded once as inverse poses. Env i records frames
+    [first[i], end[i]); `extract(x, frame)` writes row frame - first[i] of the output buffers, so
+    envs of different lengths share one launch and a finished env (holding its pose) writes nothing.
+    """
+
+    def __init__(self, binding: MarkerBinding, poses_BA: np.ndarray, n_nodes: int, first: np.ndarray,
+                 end: np.ndarray, camera: Fisheye = DEFAULT_CAMERA, device=None):
+        self.device = wp.get_device(device)
+        self.n_envs = poses_BA.shape[1]
+        self.n_nodes, self.n_markers = n_nodes, len(binding.node_ix)
+        first, end = np.asarray(first, np.int32), np.asarray(end, np.int32)
+        if np.any(end <= first) or np.any(end > len(poses_BA)):
+            raise ValueError(f"recording windows must satisfy 0 <= first < end <= {len(poses_BA)} frames")
+        n_slots = int((end - first).max())
+        inv = np.linalg.inv(poses_BA).astype(np.float32)  # invert in float64, then store float32
+        self.poses_AB = wp.array(inv, dtype=wp.mat44, device=self.device)
+        self.first = wp.array(first, dtype=wp.int32, device=self.device)
+        self.end = wp.array(end, dtype=wp.int32, device=self.device)
+        self.node_ix = wp.array(binding.node_ix, dtype=wp.int32, device=self.device)
+        self.weights = wp.array(binding.weights.astype(np.float32), dtype=float, device=self.device)
+        self.points = wp.array(centreline_A().astype(np.float32), dtype=wp.vec3, device=self.device)
+        self.cam = fisheye_params(camera)
+        self.markers = wp.zeros((n_slots, self.n_envs, self.n_markers), dtype=wp.vec2, device=self.device)
+        self.centreline = wp.zeros((n_slots, self.n_envs, N_CENTRELINE), dtype=wp.vec2, device=self.device)
+
+    def extract(self, x: wp.array, frame: int) -> None:
+        """`x`: device positions of all envs, env-major (n * N) vec3, world frame."""
+        wp.launch(project_markers, dim=(self.n_envs, self.n_markers),
+                  inputs=[x, self.n_nodes, self.poses_AB, frame, self.node_ix, self.weights, self.cam,
+                          self.first, self.end],
+                  outputs=[self.markers], device=self.device)
+        wp.launch(project_centreline, dim=(self.n_envs, N_CENTRELINE),
+                  inputs=[self.points, self.poses_AB, frame, self.cam, self.first, self.end],
+                  outputs=[self.centreline], device=self.device)
+
+    def results(self) -> tuple[np.ndarray, np.ndarray]:
+        """(slots, n, 127, 2) markers and (slots, n, 50, 2) centreline pixels, float32."""
+        return self.markers.numpy(), self.centreline.numpy()

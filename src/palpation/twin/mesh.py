@@ -1,0 +1,215 @@
+"""The sensor solid of SPEC §2.1 as linear tetrahedra (gmsh OCC), with the node sets of §2.2.
+
+Coordinates are metres in the body frame B: origin at the dome tip, +z out of the dome (the gmsh
+model is built in mm and shifted so that max z = 0). Node sets are classified in the original mm
+coordinates, before the shift, exactly as SPEC §2.2 words them.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from palpation.io import save_npz
+
+# gmsh Mesh.CharacteristicLengthFactor per named resolution; 0.3 reproduces the reference mesh.
+RESOLUTIONS = {"reference": 0.3, "coarse": 0.7}
+
+# SPEC §2.1 geometry, mm
+DOME_ROC_MM = 38.6
+WALL_R_MM, FLANGE_R_MM = 19.0, 20.0
+BASE_Z_MM, HEIGHT_MM, FLANGE_H_MM = 20.6, 18.0, 7.0
+CAP_Z_MM, FLANGE_TOP_MM, FIXED_Z_MM = 33.6, 27.6, 23.6
+_TOL_MM = 1e-6  # node coordinates on a set boundary (z = 27.6, z = 33.6) are exact to ~1e-13
+
+
+@dataclass
+class SensorMesh:
+    nodes: np.ndarray  # (N, 3) float64, metres, body frame B
+    tets: np.ndarray  # (T, 4) int32, positive orientation: det[x1-x0, x2-x0, x3-x0] > 0
+    surface_nodes: np.ndarray  # (S,) int32, outer skin that can touch (SPEC §2.2)
+    contact_tris: np.ndarray  # (K, 3) int32, boundary triangles with 3 surface nodes
+    dome_nodes: np.ndarray  # (D,) int32, surface nodes on the spherical cap (marker binding)
+    fixed: np.ndarray  # (N,) bool, nodes driven by the rigid base motion
+    resolution: str = "custom"
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.nodes)
+
+    @property
+    def n_tets(self) -> int:
+        return len(self.tets)
+
+    def save(self, path: str | os.PathLike) -> None:
+        save_npz(path, nodes=self.nodes, tets=self.tets, surface_nodes=self.surface_nodes,
+                 contact_tris=self.contact_tris, dome_nodes=self.dome_nodes, fixed=self.fixed,
+                 resolution=np.array(self.resolution))
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "SensorMesh":
+        path = Path(path)
+        if not path.exists():
+            raise FileNotFoundError(f"mesh file {path} does not exist: build it with "
+                                    f"`snakemake results/twin/mesh_<resolution>.npz`")
+        with np.load(path) as z:
+            return cls(nodes=z["nodes"], tets=z["tets"], surface_nodes=z["surface_nodes"],
+                       contact_tris=z["contact_tris"], dome_nodes=z["dome_nodes"], fixed=z["fixed"],
+                       resolution=str(z["resolution"]))
+
+    def stats(self) -> dict:
+        """Counts, tet-edge lengths (mm) and volume (mm^3) as tabulated in SPEC §2.2.
+
+        The mean edge is taken over the 6 edges of every tet (shared edges counted once per tet):
+        that is the reference's recorded 2.3230613737553244 mm; the mean over unique edges is 2.285.
+        """
+        e = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
+        pairs = self.tets[:, e].reshape(-1, 2)  # 6 edges per tet, shared edges counted per tet
+        lengths = np.linalg.norm(self.nodes[pairs[:, 0]] - self.nodes[pairs[:, 1]], axis=1) * 1e3
+        unique = np.unique(np.sort(pairs, axis=1), axis=0)
+        unique_mean = np.linalg.norm(self.nodes[unique[:, 0]] - self.nodes[unique[:, 1]], axis=1).mean()
+        return {"resolution": self.resolution, "nodes": self.n_nodes, "tets": self.n_tets,
+                "boundary_tris": len(boundary_triangles(self.tets)),
+                "surface_nodes": len(self.surface_nodes), "contact_tris": len(self.contact_tris),
+                "dome_nodes": len(self.dome_nodes), "fixed_nodes": int(self.fixed.sum()),
+                "edge_min_mm": float(lengths.min()), "edge_mean_mm": float(lengths.mean()),
+                "edge_max_mm": float(lengths.max()), "edge_mean_unique_mm": float(unique_mean * 1e3),
+                "volume_mm3": float(tet_volumes(self.nodes, self.tets).sum() * 1e9)}
+
+
+def tet_volumes(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """Signed volumes det[x1-x0, x2-x0, x3-x0] / 6."""
+    x = nodes[tets]
+    return np.einsum("ij,ij->i", np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), x[:, 3] - x[:, 0]) / 6
+
+
+def orient_positive(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    tets = np.array(tets, dtype=np.int32)
+    neg = tet_volumes(nodes, tets) < 0
+    tets[neg, 1], tets[neg, 2] = tets[neg, 2], tets[neg, 1].copy()
+    return tets
+
+
+def boundary_triangles(tets: np.ndarray) -> np.ndarray:
+    """Faces that belong to exactly one tet, (B, 3) int32."""
+    faces = tets[:, [[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]]].reshape(-1, 3)
+    key = np.sort(faces, axis=1)
+    _, idx, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
+    return faces[np.sort(idx[counts == 1])].astype(np.int32)
+
+
+def _generate_gmsh_mm(length_factor: float) -> tuple[np.ndarray, np.ndarray]:
+    import gmsh  # heavy import, only needed when meshing
+
+    gmsh.initialize(interruptible=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("General.NumThreads", 1)  # HXT is only deterministic single-threaded
+        gmsh.model.add("vitactip")
+        occ = gmsh.model.occ
+        sphere = occ.addSphere(0, 0, 0, DOME_ROC_MM)
+        wall = occ.addCylinder(0, 0, BASE_Z_MM, 0, 0, HEIGHT_MM, WALL_R_MM)
+        cap, _ = occ.intersect([(3, sphere)], [(3, wall)])
+        flange = occ.addCylinder(0, 0, BASE_Z_MM, 0, 0, FLANGE_H_MM, FLANGE_R_MM)
+        occ.fuse(cap, [(3, flange)])
+        occ.synchronize()
+        for name, value in [("Algorithm3D", 10), ("Algorithm", 6), ("Optimize", 1),
+                            ("OptimizeNetgen", 1), ("CharacteristicLengthFactor", length_factor)]:
+            gmsh.option.setNumber(f"Mesh.{name}", value)
+        gmsh.model.mesh.generate(3)
+        tags, xyz, _ = gmsh.model.mesh.getNodes()
+        types, _, conn = gmsh.model.mesh.getElements(3)
+        tet_conn = conn[list(types).index(4)].reshape(-1, 4)  # gmsh type 4 = 4-node tet
+    finally:
+        gmsh.finalize()
+    used, tets = np.unique(tet_conn, return_inverse=True)  # drop nodes no tet uses
+    lookup = {int(t): i for i, t in enumerate(tags)}
+    nodes = xyz.reshape(-1, 3)[[lookup[int(u)] for u in used]]
+    return nodes, tets.reshape(-1, 4)
+
+
+def classify_nodes_mm(nodes_mm: np.ndarray, tets: np.ndarray) -> dict[str, np.ndarray]:
+    """SPEC §2.2 node sets from mm coordinates in the original (unshifted) frame."""
+    x, y, z = nodes_mm.T
+    rho, r = np.hypot(x, y), np.linalg.norm(nodes_mm, axis=1)
+    t = _TOL_MM
+    surface = ((z > CAP_Z_MM + t) & (r > 38.5)) | ((z > FLANGE_TOP_MM + t) & (z <= CAP_Z_MM + t)
+                                                  & (rho > 18.9))
+    fixed = (z < FIXED_Z_MM - t) | ((rho > WALL_R_MM + t) & (z < FLANGE_TOP_MM - t))
+    tris = boundary_triangles(tets)
+    contact = tris[surface[tris].all(axis=1)]
+    dome = np.flatnonzero(surface & (z >= CAP_Z_MM - t))
+    return {"surface_nodes": np.flatnonzero(surface).astype(np.int32), "contact_tris": contact,
+            "dome_nodes": dome.astype(np.int32), "fixed": fixed}
+
+
+def build_sensor_mesh(resolution: str = "coarse", length_factor: float | None = None) -> SensorMesh:
+    """Mesh the sensor; `length_factor` overrides the factor of a named resolution."""
+    if length_factor is None:
+        if resolution not in RESOLUTIONS:
+            raise ValueError(f"unknown mesh resolution {resolution!r}: use one of "
+                             f"{sorted(RESOLUTIONS)} or pass length_factor")
+        length_factor = RESOLUTIONS[resolution]
+    nodes_mm, tets = _generate_gmsh_mm(length_factor)
+    tets = orient_positive(nodes_mm, tets)
+    sets = classify_nodes_mm(nodes_mm, tets)
+    nodes = nodes_mm * 1e-3
+    nodes[:, 2] -= nodes[:, 2].max()  # origin at the dome tip
+    return SensorMesh(nodes=nodes, tets=tets, resolution=resolution, **sets)
+
+
+def box_mesh(size=(0.01, 0.01, 0.01), divisions=(2, 2, 2), fixed: str = "bottom") -> SensorMesh:
+    """A structured box of tets (6 per cell, Kuhn split) in z in [-lz, 0], for tests.
+
+    `fixed`: "bottom" (z = -lz face driven), "none". Surface/dome = the top face z = 0.
+    """
+    (lx, ly, lz), (nx, ny, nz) = size, divisions
+    g = np.stack(np.meshgrid(np.linspace(0, lx, nx + 1), np.linspace(0, ly, ny + 1),
+                             np.linspace(-lz, 0, nz + 1), indexing="ij"), -1).reshape(-1, 3)
+    idx = np.arange(len(g)).reshape(nx + 1, ny + 1, nz + 1)
+    kuhn = [(0, 1, 3, 7), (0, 1, 5, 7), (0, 2, 3, 7), (0, 2, 6, 7), (0, 4, 5, 7), (0, 4, 6, 7)]
+    tets = []
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                c = [idx[i + a, j + b, k + d] for a in (0, 1) for b in (0, 1) for d in (0, 1)]
+                tets += [[c[p] for p in (q[0], q[1], q[2], q[3])] for q in kuhn]
+    # corner order c = (i,j,k) bits (a,b,d) -> index 4a+2b+d; Kuhn paths through that cube
+    tets = orient_positive(g, np.array(tets))
+    top = np.isclose(g[:, 2], 0.0)
+    tris = boundary_triangles(tets)
+    fixed_mask = np.isclose(g[:, 2], -lz) if fixed == "bottom" else np.zeros(len(g), bool)
+    top_nodes = np.flatnonzero(top).astype(np.int32)
+    return SensorMesh(nodes=g, tets=tets, surface_nodes=top_nodes, contact_tris=tris[top[tris].all(axis=1)],
+                      dome_nodes=top_nodes, fixed=fixed_mask, resolution="box")
+
+
+def build_vessel_points(center=(0.039, 0.039, 0.012), radius: float = 0.002, length: float = 0.040,
+                        length_factor: float = 0.3) -> np.ndarray:
+    """Nodes (P, 3) of the reference's vessel tet mesh, world metres, axis along +x (SPEC §3.1).
+
+    gmsh cylinder along z in mm, rotated R_y(90 deg) onto x; with the reference options this is
+    the reference's 506-node mesh. Only the nearest-centroid contact rule uses these points.
+    """
+    import gmsh
+
+    gmsh.initialize(interruptible=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("General.NumThreads", 1)
+        gmsh.model.add("vessel")
+        gmsh.model.occ.addCylinder(0, 0, 0, 0, 0, length * 1e3, radius * 1e3)
+        gmsh.model.occ.synchronize()
+        for name, value in [("Algorithm3D", 10), ("Algorithm", 6), ("Optimize", 1),
+                            ("OptimizeNetgen", 1), ("CharacteristicLengthFactor", length_factor)]:
+            gmsh.option.setNumber(f"Mesh.{name}", value)
+        gmsh.model.mesh.generate(3)
+        _, xyz, _ = gmsh.model.mesh.getNodes()
+    finally:
+        gmsh.finalize()
+    p = xyz.reshape(-1, 3) * 1e-3
+    along_x = np.stack([p[:, 2], p[:, 1], -p[:, 0]], axis=1)  # R_y(90): (x, y, z) -> (z, y, -x)
+    return along_x + np.asarray(center) - [0.5 * length, 0.0, 0.0]

@@ -1,0 +1,106 @@
+"""One npz per simulated trajectory plus a JSON manifest (format: docs/sim_format.md).
+
+Both are written atomically, so a killed batch leaves either complete files or none. A failed
+environment never gets a trajectory file: it is listed under `failed` in the manifest with its
+parameters, so nothing diverged can be mistaken for data.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from palpation.io import save_json, save_npz
+
+FORMAT = "palpation-sim/1"
+KEYS = ("markers", "labels", "centreline_px", "contact", "T_BA", "frame_index", "centreline_A",
+        "rest_markers_px", "params", "seed", "kind", "format")
+
+
+@dataclass
+class TrajectoryRecord:
+    """The recorded frames of one environment (F = recorded frames)."""
+
+    name: str  # file stem, e.g. trajectory_0000
+    kind: str
+    seed: int
+    params: dict  # E (Pa), k_n (N/m), c_n, heading_deg, heading_offset_deg, vessel, ... (JSON-able)
+    markers: np.ndarray  # (F, 127, 2) float32 px
+    labels: np.ndarray  # (F, 127) int8
+    centreline_px: np.ndarray  # (F, 50, 2) float32 px
+    contact: np.ndarray  # (F,) bool
+    T_BA: np.ndarray  # (F, 4, 4) float64, metres
+    frame_index: np.ndarray  # (F,) int32, simulated frame index of each recorded frame
+    centreline_A: np.ndarray  # (50, 3) float64, metres, world frame
+    rest_markers_px: np.ndarray  # (127, 2) float32, bound markers of the undeformed sensor
+
+
+@dataclass
+class FailedRecord:
+    name: str
+    kind: str
+    seed: int
+    params: dict
+    detected_at_frame: int  # the host read that saw the flag (every 20 frames and at the env's end)
+    reason: str = "diverged or inverted element"
+
+
+@dataclass
+class Manifest:
+    files: list[dict] = field(default_factory=list)
+    failed: list[dict] = field(default_factory=list)
+    meta: dict = field(default_factory=dict)
+
+
+def save_trajectory(path: str | os.PathLike, rec: TrajectoryRecord) -> Path:
+    F = len(rec.markers)
+    shapes = {"markers": (F, 127, 2), "labels": (F, 127), "centreline_px": (F, 50, 2), "contact": (F,),
+              "T_BA": (F, 4, 4), "frame_index": (F,)}
+    for key, shape in shapes.items():
+        if np.shape(getattr(rec, key)) != shape:
+            raise ValueError(f"{rec.name}: `{key}` has shape {np.shape(getattr(rec, key))}, expected {shape}")
+    save_npz(path, markers=rec.markers.astype(np.float32), labels=rec.labels.astype(np.int8),
+             centreline_px=rec.centreline_px.astype(np.float32), contact=rec.contact.astype(bool),
+             T_BA=rec.T_BA.astype(np.float64), frame_index=rec.frame_index.astype(np.int32),
+             centreline_A=rec.centreline_A.astype(np.float64),
+             rest_markers_px=rec.rest_markers_px.astype(np.float32),
+             params=np.array(json.dumps(rec.params, sort_keys=True)), seed=np.int64(rec.seed),
+             kind=np.array(rec.kind), format=np.array(FORMAT))
+    return Path(path)
+
+
+def load_trajectory(path: str | os.PathLike) -> dict:
+    """Read a trajectory file back into a dict of arrays; `params` is decoded from JSON."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"trajectory file {path} does not exist; run the simulate stage first")
+    with np.load(path, allow_pickle=False) as z:
+        missing = [k for k in KEYS if k not in z.files]
+        if missing:
+            raise ValueError(f"{path}: not a {FORMAT} trajectory file, missing keys {missing}")
+        out = {k: z[k] for k in z.files}
+    out["params"] = json.loads(str(out["params"]))
+    out["kind"], out["format"], out["seed"] = str(out["kind"]), str(out["format"]), int(out["seed"])
+    return out
+
+
+def write_outputs(out_dir: str | os.PathLike, records: list[TrajectoryRecord],
+                  failed: list[FailedRecord], meta: dict | None = None,
+                  manifest_name: str = "manifest.json") -> Path:
+    """Write every trajectory file, then the manifest (last, so it only lists files that exist)."""
+    out_dir = Path(out_dir)
+    manifest = Manifest(meta={"format": FORMAT, **(meta or {})})
+    for rec in records:
+        save_trajectory(out_dir / f"{rec.name}.npz", rec)
+        manifest.files.append({"file": f"{rec.name}.npz", "kind": rec.kind, "seed": rec.seed,
+                               "params": rec.params, "n_frames": int(len(rec.markers)),
+                               "positive_rate": float(rec.labels.mean())})
+    for bad in failed:
+        manifest.failed.append(vars(bad).copy())
+    path = out_dir / manifest_name
+    save_json(path, {"files": manifest.files, "failed": manifest.failed, **manifest.meta})
+    return path

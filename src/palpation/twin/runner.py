@@ -1,0 +1,224 @@
+"""Run a batch of trajectories through `BatchedTwin`, extracting markers every recorded frame.
+
+Each env has its own interaction, heading and contact/material parameters. All pose schedules are
+planned up front (the controller only reads the kinematic copy) and padded to the longest: an env
+that has finished holds its last pose and records nothing more. Markers and the vessel centreline
+are projected on the device every frame into per-env windows (SPEC quirk 6 fixed), and copied to the
+host once at the end; only the contact flags and the periodic health check cross per frame.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import asdict, dataclass, field, replace
+
+import numpy as np
+import warp as wp
+from tqdm.auto import tqdm
+
+from palpation.twin.config import TwinConfig
+from palpation.twin.markers import MarkerBinding, MarkerProjector, bind_markers, centreline_A, marker_labels
+from palpation.twin.mesh import SensorMesh
+from palpation.twin.output import FailedRecord, TrajectoryRecord
+from palpation.twin.simulator import BatchedTwin
+from palpation.twin.trajectory import Trajectory, padded_schedule, plan_trajectory
+
+log = logging.getLogger(__name__)
+READ_FAILED_EVERY = 20  # frames between host reads of the failure flags (the reference's interval)
+
+
+# per-env twin parameters -> (TwinConfig section, field) of their default; names as BatchedTwin's
+PARAM_DEFAULTS = {"E": ("material", "E"), "nu": ("material", "nu"), "k_n": ("contact", "k_n"),
+                  "c_n": ("contact", "c_n"), "k_t": ("contact", "k_t"), "mu": ("contact", "mu"),
+                  "k_s": ("contact", "k_s"), "c_s": ("contact", "c_s")}
+GEOMETRY_KEYS = ("heading_offset_deg", "depth_mm", "angle_deg")
+
+
+@dataclass
+class EnvRequest:
+    """One environment of a batch. Parameters are in the twin's (physical) units, as in TwinConfig.
+
+    A parameter left None comes from the config; depth_mm / angle_deg left None are SPEC's canonical
+    geometry of the interaction (twin.trajectory.geometry).
+    """
+
+    kind: str
+    heading_offset_deg: float = 0.0
+    E: float | None = None  # Pa; None = cfg.material.E
+    k_n: float | None = None  # N/m; None = cfg.contact.k_n
+    c_n: float | None = None  # None = cfg.contact.c_n
+    vessel: bool = False
+    seed: int = 0
+    name: str = ""
+    record: str = "trajectory"  # "trajectory": the SPEC window; "last": the last frame only
+    nu: float | None = None
+    k_t: float | None = None  # N s/m
+    mu: float | None = None
+    k_s: float | None = None  # N/m per node (phantom contact only)
+    c_s: float | None = None
+    depth_mm: float | None = None  # final tip depth below the phantom top; None = canonical
+    angle_deg: float | None = None  # twist angle; None = canonical (twist_z: 30 deg)
+
+    def resolved(self, cfg: TwinConfig) -> "EnvRequest":
+        """A copy with every None twin parameter taken from the config (geometry stays as given)."""
+        fields = asdict(self)
+        for key, (section, name) in PARAM_DEFAULTS.items():
+            if fields[key] is None:
+                fields[key] = getattr(getattr(cfg, section), name)
+        return EnvRequest(**fields)
+
+    def twin_params(self) -> dict:
+        """The JSON-able parameters a record keeps (after `resolved`)."""
+        return {**{k: getattr(self, k) for k in PARAM_DEFAULTS}, "vessel": self.vessel,
+                "heading_offset_deg": self.heading_offset_deg, "depth_mm": self.depth_mm,
+                "angle_deg": self.angle_deg}
+
+
+@dataclass
+class BatchResult:
+    records: list[TrajectoryRecord]
+    failed: list[FailedRecord]
+    frames: int  # simulated frames (the longest env)
+    wall_s: float
+    failed_mask: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+
+
+def tip_node_B(mesh: SensorMesh) -> np.ndarray:
+    """The undeformed tip the controller tracks: the highest node in B (and in E)."""
+    return mesh.nodes[np.argmax(mesh.nodes[:, 2])]
+
+
+def env_params(requests: list[EnvRequest]) -> dict[str, np.ndarray]:
+    """Per-env arrays for BatchedTwin from resolved requests."""
+    out = {k: np.array([getattr(r, k) for r in requests], np.float64) for k in PARAM_DEFAULTS}
+    out["vessel"] = np.array([r.vessel for r in requests], bool)
+    return out
+
+
+def plan_requests(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest],
+                  max_frames: int | None = None) -> list[Trajectory]:
+    """The pose schedule of each (resolved) request, cut to `max_frames` if given."""
+    tip_B = tip_node_B(mesh)
+    return [truncate(plan_trajectory(r.kind, r.heading_offset_deg, tip_B_m=tip_B, frame_dt_s=cfg.frame_dt,
+                                     depth_mm=r.depth_mm, angle_deg=r.angle_deg), max_frames)
+            for r in requests]
+
+
+def record_windows(trajs: list[Trajectory], requests: list[EnvRequest]) -> tuple[np.ndarray, np.ndarray]:
+    """Per env [first, end) frames to record."""
+    end = np.array([t.n_frames for t in trajs])
+    first = np.array([t.record_from if r.record == "trajectory" else t.n_frames - 1
+                      for t, r in zip(trajs, requests)])
+    if any(r.record not in ("trajectory", "last") for r in requests):
+        raise ValueError("EnvRequest.record must be 'trajectory' or 'last'")
+    return first, end
+
+
+def truncate(traj: Trajectory, max_frames: int | None) -> Trajectory:
+    """The first `max_frames` frames (smoke tests, benchmarks); the window start moves in if needed."""
+    if max_frames is None or traj.n_frames <= max_frames:
+        return traj
+    if max_frames < 1:
+        raise ValueError(f"max_frames must be >= 1, got {max_frames}")
+    return replace(traj, T_BA=traj.T_BA[:max_frames], record_from=min(traj.record_from, max_frames - 1))
+
+
+def run_batch(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest],
+              binding: MarkerBinding | None = None, device: str | None = None, progress: bool = True,
+              max_frames: int | None = None) -> BatchResult:
+    """Simulate every request as one batch; failed envs come back in `failed`, never as records.
+
+    `max_frames` cuts every schedule short (for smoke tests and timing only).
+    """
+    if not requests:
+        raise ValueError("run_batch needs at least one EnvRequest")
+    device = wp.get_device(device or cfg.device)
+    if binding is None:
+        from palpation.markers.template import rest_template
+        binding = bind_markers(mesh.nodes, mesh.dome_nodes, rest_template())
+    reqs = [r.resolved(cfg) for r in requests]
+    trajs = plan_requests(mesh, cfg, reqs, max_frames)
+    schedule, lengths = padded_schedule(trajs)
+    first, end = record_windows(trajs, reqs)
+    n, n_frames = len(reqs), len(schedule)
+
+    start = time.perf_counter()
+    sim = BatchedTwin(mesh, n, cfg, env_params(reqs), device=device)
+    sim.reset(np.stack([t.T_BA0 for t in trajs]))
+    proj = MarkerProjector(binding, schedule, mesh.n_nodes, first, end, device=device)
+    contact_dev = wp.zeros(n_frames * n, dtype=wp.int32, device=device)  # copied on device, read once
+    failed_at = np.full(n, -1)
+    # the simulator's failure flag is sticky, so reading it sparsely (plus at each env's last frame,
+    # to tell a failure inside an env's own frames from one after it finished) loses nothing
+    checks = set(range(READ_FAILED_EVERY - 1, n_frames, READ_FAILED_EVERY)) | set((lengths - 1).tolist())
+    checked_to = 0  # frames [0, checked_to) are covered by earlier checks
+    for f in tqdm(range(n_frames), desc=f"twin x{n}", unit="frame", disable=not progress, leave=False):
+        sim.step_frame(schedule[f])
+        wp.copy(contact_dev, sim.contact_flag, dest_offset=f * n, count=n)
+        proj.extract(sim.x, f)
+        if f in checks:
+            # blame only envs still inside their own frames since the last check
+            bad = sim.failed() & (failed_at < 0) & (lengths > checked_to)
+            failed_at[bad] = f
+            checked_to = f + 1
+            if np.all((failed_at >= 0) | (lengths <= checked_to)):
+                break  # every env has either failed or finished
+    markers, centre = proj.results()
+    contact = contact_dev.numpy().reshape(n_frames, n).astype(bool)
+    wall = time.perf_counter() - start
+
+    records, failed = [], []
+    line_A = centreline_A()
+    for i, (req, traj) in enumerate(zip(reqs, trajs)):
+        params = {**req.twin_params(),
+                  "heading_deg": None if np.isnan(traj.heading_deg) else traj.heading_deg}  # strict JSON
+        name = req.name or f"env_{i:04d}"
+        if failed_at[i] >= 0:
+            log.warning("env %d (%s) failed at frame %d with %s", i, name, failed_at[i], params)
+            failed.append(FailedRecord(name=name, kind=req.kind, seed=req.seed, params=params,
+                                       detected_at_frame=int(failed_at[i])))
+            continue
+        frames = np.arange(first[i], end[i])
+        m, c, k = markers[: len(frames), i], centre[: len(frames), i], contact[frames, i]
+        records.append(TrajectoryRecord(
+            name=name, kind=req.kind, seed=req.seed, params=params, markers=m, centreline_px=c,
+            labels=marker_labels(m, c, k), contact=k, T_BA=schedule[frames, i], frame_index=frames,
+            centreline_A=line_A, rest_markers_px=binding.rest_px.astype(np.float32)))
+    return BatchResult(records=records, failed=failed, frames=f + 1, wall_s=wall, failed_mask=failed_at >= 0)
+
+
+def simulate_states(mesh: SensorMesh, cfg: TwinConfig, requests: list[tuple[str, dict]],
+                    device: str | None = None, binding: MarkerBinding | None = None,
+                    split_by_kind: bool = False, max_frames: int | None = None
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """For calibration: markers at the last frame of each (kind, params) request.
+
+    params keys (all optional): any per-env twin parameter (PARAM_DEFAULTS: E, nu, k_n, c_n, k_t,
+    mu, k_s, c_s), vessel, heading_offset_deg, depth_mm, angle_deg. Every request is checked before
+    anything runs. One batch, or with `split_by_kind` one batch per kind: on a CPU every env costs
+    the longest env's frames, so a 36-frame press should not ride along a 398-frame slide.
+    Returns (n, 127, 2) float32 pixels (NaN for a failed env) and (n,) bool failed flags.
+    """
+    allowed = set(PARAM_DEFAULTS) | set(GEOMETRY_KEYS) | {"vessel"}
+    envs = []
+    for i, (kind, params) in enumerate(requests):
+        unknown = set(params) - allowed
+        if unknown:
+            raise ValueError(f"request {i} ({kind}): unknown parameters {sorted(unknown)}; "
+                             f"use {sorted(allowed)}")
+        env = EnvRequest(kind=kind, record="last", name=f"state_{i:04d}", **params)
+        plan_requests(mesh, cfg, [env.resolved(cfg)], max_frames=1)  # bad kind/geometry: fail now
+        envs.append(env)
+    groups = [list(range(len(envs)))]
+    if split_by_kind:
+        groups = [[i for i, e in enumerate(envs) if e.kind == k] for k in dict.fromkeys(e.kind for e in envs)]
+    out = np.full((len(envs), 127, 2), np.nan, np.float32)
+    failed = np.zeros(len(envs), bool)
+    for idx in groups:
+        result = run_batch(mesh, cfg, [envs[i] for i in idx], binding=binding, device=device,
+                           progress=False, max_frames=max_frames)
+        failed[idx] = result.failed_mask
+        for i, rec in zip(np.asarray(idx)[~result.failed_mask], result.records):
+            out[i] = rec.markers[-1]
+    return out, failed

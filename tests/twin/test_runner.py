@@ -1,0 +1,104 @@
+"""Batched trajectory runs on the coarse mesh: files, manifest, failures, determinism, the app."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_dir
+
+from palpation.markers.template import rest_template
+from palpation.paths import REPO_ROOT
+from palpation.twin.config import TwinConfig
+from palpation.twin.markers import bind_markers
+from palpation.twin.mesh import build_sensor_mesh
+from palpation.twin.output import load_trajectory, write_outputs
+from palpation.twin.runner import EnvRequest, run_batch, simulate_states
+from palpation.twin.trajectory import plan_trajectory
+
+ABSURD_E = 1e11  # Pa: far past the explicit step's stability limit, NaN within a few frames
+
+
+@pytest.fixture(scope="module")
+def mesh():
+    return build_sensor_mesh("coarse")
+
+
+@pytest.fixture(scope="module")
+def binding(mesh):
+    return bind_markers(mesh.nodes, mesh.dome_nodes, rest_template())
+
+
+def test_smoke_run_writes_valid_file_and_manifest(tmp_path, mesh, binding):
+    reqs = [EnvRequest("press", vessel=True, seed=3, name="press_vessel"),
+            EnvRequest("slide", heading_offset_deg=5.0, seed=3, name="slide_cut")]
+    res = run_batch(mesh, TwinConfig(), reqs, binding, device="cpu", progress=False, max_frames=36)
+    assert not res.failed and [r.name for r in res.records] == ["press_vessel", "slide_cut"]
+    manifest = write_outputs(tmp_path, res.records, res.failed, meta={"set": "smoke"})
+
+    press = load_trajectory(tmp_path / "press_vessel.npz")
+    assert press["markers"].shape == (36, 127, 2) and press["markers"].dtype == np.float32
+    assert np.isfinite(press["markers"]).all()
+    assert press["labels"].dtype == np.int8 and press["centreline_px"].shape == (36, 50, 2)
+    assert np.array_equal(press["T_BA"], plan_trajectory("press").T_BA)  # tip node is the origin
+    assert press["contact"][-1] and not press["contact"][0]  # the press reaches the vessel
+    assert press["labels"][~press["contact"]].sum() == 0 and press["labels"].sum() > 0
+    # frame 0 does not move, so the markers sit at their bound rest positions
+    assert np.abs(press["markers"][0] - press["rest_markers_px"]).max() < 0.05
+    assert press["params"]["vessel"] is True and press["seed"] == 3 and press["kind"] == "press"
+
+    slide = load_trajectory(tmp_path / "slide_cut.npz")  # cut at 36 frames: only its last frame
+    assert list(slide["frame_index"]) == [35] and slide["params"]["heading_deg"] == pytest.approx(-85.0)
+    doc = json.loads(manifest.read_text())
+    assert [f["file"] for f in doc["files"]] == ["press_vessel.npz", "slide_cut.npz"] and doc["failed"] == []
+    assert doc["format"] == "palpation-sim/1" and doc["set"] == "smoke"
+
+
+def test_failed_env_is_listed_not_saved(tmp_path, mesh, binding):
+    reqs = [EnvRequest("press", name="fine"), EnvRequest("press", E=ABSURD_E, name="absurd", seed=7)]
+    res = run_batch(mesh, TwinConfig(), reqs, binding, device="cpu", progress=False, max_frames=6)
+    assert [r.name for r in res.records] == ["fine"] and list(res.failed_mask) == [False, True]
+    write_outputs(tmp_path, res.records, res.failed)
+    assert sorted(p.name for p in tmp_path.glob("*.npz")) == ["fine.npz"]
+    failed = json.loads((tmp_path / "manifest.json").read_text())["failed"]
+    assert len(failed) == 1 and failed[0]["name"] == "absurd" and failed[0]["params"]["E"] == ABSURD_E
+    assert failed[0]["seed"] == 7 and 0 <= failed[0]["detected_at_frame"] < 6
+
+
+def test_simulate_states_last_frame_and_failures(mesh, binding):
+    requests = [("press", {"vessel": True}), ("press", {"E": ABSURD_E})]
+    markers, failed = simulate_states(mesh, TwinConfig(), requests, device="cpu", binding=binding)
+    full = run_batch(mesh, TwinConfig(), [EnvRequest("press", vessel=True)], binding, device="cpu",
+                     progress=False)
+    assert list(failed) == [False, True] and np.isnan(markers[1]).all()
+    assert np.array_equal(markers[0], full.records[0].markers[-1])  # batching does not change an env
+    with pytest.raises(ValueError, match="unknown parameters"):
+        simulate_states(mesh, TwinConfig(), [("press", {"young": 1.0})], binding=binding)
+
+
+def compose_simulate(mesh_path: Path, out_dir: Path):
+    with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
+        return compose(config_name="simulate", overrides=[
+            "set=randomised", "n_pairs=1", "max_frames=84", "progress=false", "track=false",
+            f"mesh={mesh_path}", f"out.dir={out_dir}"])
+
+
+def test_app_same_seed_is_bit_identical(tmp_path, mesh):
+    from palpation.apps.simulate import run, trajectory_set
+
+    mesh_path = tmp_path / "mesh.npz"
+    mesh.save(mesh_path)
+    outs = []
+    for rep in ("a", "b"):
+        summary = run(compose_simulate(mesh_path, tmp_path / rep))
+        assert summary["n_files"] == 2 and summary["n_failed"] == 0
+        outs.append(tmp_path / rep)
+    for name in ("trajectory_0000.npz", "trajectory_0001.npz"):
+        a, b = load_trajectory(outs[0] / name), load_trajectory(outs[1] / name)
+        for key in ("markers", "labels", "centreline_px", "contact", "T_BA", "frame_index"):
+            assert a[key].tobytes() == b[key].tobytes(), f"{name}:{key} differs between identical runs"
+    first = load_trajectory(outs[0] / "trajectory_0000.npz")
+    assert list(first["frame_index"]) == [81, 82, 83] and first["params"]["vessel"] is True
+    reqs = trajectory_set("randomised", 42, n_pairs=2)  # SPEC §7 check values
+    assert [round(r.heading_offset_deg, 2) for r in reqs] == [8.22, 5.92, 7.83, -1.49]
+    assert [round(r.k_n * 5) for r in reqs[:2]] == [24750, 9238] and round(reqs[0].c_n, 1) == 85.9

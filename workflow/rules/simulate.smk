@@ -1,0 +1,84 @@
+# Twin trajectories (palpation.apps.simulate), their rendering and the twin benchmark.
+# Needs common.smk (PY, hydra_dir, config: twin_resolution, device) and twin.smk (rule mesh).
+# Output format: docs/sim_format.md.
+
+CANONICAL = ["press", "twist_z", "twist_x", "slide"]
+TWIN_MESH = f"results/twin/mesh_{config['twin_resolution']}.npz"
+TWIN_ARGS = f"twin/mesh={config['twin_resolution']} twin.device={config['device']}"
+GPU = 1 if config["device"] == "cuda" else 0
+
+
+rule simulate_canonical:
+    input:
+        mesh=TWIN_MESH,
+    output:
+        manifest="results/twin/canonical/manifest.json",
+        npz=expand("results/twin/canonical/{kind}.npz", kind=CANONICAL),
+    params:
+        hydra=lambda wildcards, output: hydra_dir(output.manifest),
+        outdir=lambda wildcards, output: Path(output.manifest).parent,
+        twin=TWIN_ARGS,
+    resources:
+        gpu=GPU,
+    log:
+        "results/logs/twin/simulate_canonical.log",
+    shell:
+        "{PY} palpation.apps.simulate set=canonical {params.twin} mesh={input.mesh}"
+        " out.dir={params.outdir} progress=false {params.hydra} > {log} 2>&1"
+
+
+rule simulate_vessel_slide:
+    input:
+        mesh=TWIN_MESH,
+    output:
+        manifest="results/twin/vessel_slide/manifest.json",
+        npz="results/twin/vessel_slide/vessel_slide.npz",
+    params:
+        hydra=lambda wildcards, output: hydra_dir(output.manifest),
+        outdir=lambda wildcards, output: Path(output.manifest).parent,
+        twin=TWIN_ARGS,
+    resources:
+        gpu=GPU,
+    log:
+        "results/logs/twin/simulate_vessel_slide.log",
+    shell:
+        "{PY} palpation.apps.simulate set=vessel_slide {params.twin} mesh={input.mesh}"
+        " out.dir={params.outdir} progress=false {params.hydra} > {log} 2>&1"
+
+
+rule render_twin:
+    input:
+        canonical=rules.simulate_canonical.output.manifest,
+        slide=rules.simulate_vessel_slide.output.manifest,
+    output:
+        png=report("results/twin/render/markers.png", category="Twin"),
+        pdf="results/twin/render/markers.pdf",
+        mp4=expand(
+            "results/twin/render/{name}.mp4",
+            name=[f"canonical_{k}" for k in CANONICAL] + ["vessel_slide_vessel_slide"],
+        ),
+    params:
+        outdir=lambda wildcards, output: Path(output.png).parent,
+    log:
+        "results/logs/twin/render_twin.log",
+    shell:
+        "{PY} palpation.twin.render --out {params.outdir} {input.canonical} {input.slide} > {log} 2>&1"
+
+
+rule bench_twin:
+    input:
+        meshes=expand("results/twin/mesh_{resolution}.npz", resolution=["coarse", "reference"]),
+    output:
+        json="results/bench/twin.json",
+    params:
+        # CPU: ~20 s of timed frames per point, extrapolated to a full slide (recorded in the JSON)
+        budget=20 if config["device"] == "cpu" else 120,
+        device=config["device"],
+        mesh_dir=lambda wildcards, input: Path(input.meshes[0]).parent,
+    resources:
+        gpu=GPU,
+    log:
+        "results/logs/bench/twin.log",
+    shell:
+        "{PY} palpation.twin.benchmark --device {params.device} --mesh-dir {params.mesh_dir}"
+        " --budget-s {params.budget} --out {output.json} > {log} 2>&1"

@@ -1,0 +1,18 @@
+# The twin's FEM mesh, built once per resolution and cached (conf/twin/mesh/<resolution>.yaml).
+
+
+rule mesh:
+    output:
+        mesh="results/twin/mesh_{resolution}.npz",
+        stats="results/twin/mesh_{resolution}.json",
+    wildcard_constraints:
+        resolution="[a-z]+",
+    params:
+        # one Hydra job log per resolution, not a shared results/twin/mesh.log
+        hydra=lambda wildcards, output: hydra_dir(output.mesh)
+        + f" hydra.job.name=mesh_{wildcards.resolution}",
+    log:
+        "results/logs/twin/mesh_{resolution}.log",
+    shell:
+        "python -m palpation.apps.mesh twin/mesh={wildcards.resolution}"
+        " out.mesh={output.mesh} out.stats={output.stats} {params.hydra} > {log} 2>&1"
