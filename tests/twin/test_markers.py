@@ -1,5 +1,6 @@
 """Marker binding (SPEC §5.2), the Warp projection kernels against numpy, and the label rule (§7)."""
 
+import os
 import numpy as np
 import pytest
 import warp as wp
@@ -9,7 +10,7 @@ from palpation.markers.template import rest_template
 from palpation.twin.markers import (
     MarkerProjector, bind_markers, body_to_camera, centreline_A, marker_labels, project_markers_np,
     project_points_np)
-from palpation.twin.mesh import build_sensor_mesh
+from palpation.twin.mesh import cached_sensor_mesh
 from palpation.twin.trajectory import padded_schedule, plan_trajectory
 
 DEVICES = ["cpu"] + (["cuda:0"] if wp.is_cuda_available() else [])
@@ -17,7 +18,7 @@ DEVICES = ["cpu"] + (["cuda:0"] if wp.is_cuda_available() else [])
 
 @pytest.fixture(scope="module")
 def coarse():
-    return build_sensor_mesh("coarse")
+    return cached_sensor_mesh("coarse", os.environ.get("PALPATION_MESH_CACHE"))
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +45,7 @@ def test_binding_weights(coarse, template):
 
 @pytest.mark.parametrize("resolution, mean_px, max_px", [("coarse", 8.0, 20.0), ("reference", 3.5, 8.0)])
 def test_rest_markers_reproduce_template_within_fit_residual(resolution, mean_px, max_px, template):
-    mesh = build_sensor_mesh(resolution)
+    mesh = cached_sensor_mesh(resolution, os.environ.get("PALPATION_MESH_CACHE"))
     b = bind_markers(mesh.nodes, mesh.dome_nodes, template)
     # measured: coarse 6.46 / 16.1 px, reference 2.78 / 6.67 px (mean / max); node spacing bounds it
     assert b.residual_px.mean() < mean_px and b.residual_px.max() < max_px

@@ -1,5 +1,6 @@
 """Batched trajectory runs on the coarse mesh: files, manifest, failures, determinism, the app."""
 
+import os
 import json
 from pathlib import Path
 
@@ -11,7 +12,7 @@ from palpation.markers.template import rest_template
 from palpation.paths import REPO_ROOT
 from palpation.twin.config import TwinConfig
 from palpation.twin.markers import bind_markers
-from palpation.twin.mesh import build_sensor_mesh
+from palpation.twin.mesh import cached_sensor_mesh
 from palpation.twin.output import load_trajectory, write_outputs
 from palpation.twin.runner import EnvRequest, run_batch, simulate_states
 from palpation.twin.trajectory import plan_trajectory
@@ -21,7 +22,7 @@ ABSURD_E = 1e11  # Pa: far past the explicit step's stability limit, NaN within 
 
 @pytest.fixture(scope="module")
 def mesh():
-    return build_sensor_mesh("coarse")
+    return cached_sensor_mesh("coarse", os.environ.get("PALPATION_MESH_CACHE"))
 
 
 @pytest.fixture(scope="module")

@@ -161,6 +161,18 @@ def build_sensor_mesh(resolution: str = "coarse", length_factor: float | None = 
     return SensorMesh(nodes=nodes, tets=tets, resolution=resolution, **sets)
 
 
+def cached_sensor_mesh(resolution: str, cache_dir: str | os.PathLike | None = None) -> SensorMesh:
+    """The mesh cached by rule `mesh` (`<cache_dir>/mesh_<resolution>.npz`) if there, else a new one.
+
+    Machines without gmsh (e.g. a GPU node) run on meshes built elsewhere this way.
+    """
+    if cache_dir is not None:
+        path = Path(cache_dir) / f"mesh_{resolution}.npz"
+        if path.exists():
+            return SensorMesh.load(path)
+    return build_sensor_mesh(resolution)
+
+
 def box_mesh(size=(0.01, 0.01, 0.01), divisions=(2, 2, 2), fixed: str = "bottom") -> SensorMesh:
     """A structured box of tets (6 per cell, Kuhn split) in z in [-lz, 0], for tests.
 
