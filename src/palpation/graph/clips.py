@@ -1,0 +1,74 @@
+"""Windows of L frames over sequences and their gathering into augmented clips (SPEC §8.3).
+
+A window starting at frame s holds frames s, s+d, ..., s+(L-1)d. Sim (d = 24): starts 0, d, 2d, ...
+while the window fits in the F//d coarse steps (9 per 317-frame trajectory at L = 5). Real data
+(d = 1): every start, 12 per 16-frame Silicone video at L = 5. Sequences marked `centred` (Meat,
+which holds only the central frames of the reference's clips) get one window centred on every frame,
+frames outside the sequence replaced by the nearest one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from palpation.graph.augment import ROTATION_STEP_DEG, rotate_points, rotation_permutations, sim_labels
+from palpation.graph.sources import Sequences
+
+
+def window_starts(n_frames: int, clip_len: int, stride: int) -> np.ndarray:
+    """First frame of every window; Sim uses a start step of `stride` (coarse frames), real data 1."""
+    steps = n_frames // stride
+    return np.arange(max(steps - clip_len + 1, 0)) * stride
+
+
+class ClipSet:
+    """All windows of some sequences; `gather` builds clip arrays with optional rotation."""
+
+    def __init__(self, seqs: Sequences, clip_len: int, rest: np.ndarray):
+        self.seqs, self.clip_len = seqs, clip_len
+        if seqs.window == "centred":
+            half = (clip_len // 2) * seqs.stride
+            rows = [(i, c - half) for i, m in enumerate(seqs.markers) for c in range(len(m))]
+        else:
+            rows = [(i, s) for i, m in enumerate(seqs.markers)
+                    for s in window_starts(len(m), clip_len, seqs.stride)]
+        if not rows:
+            raise ValueError(f"{seqs.name}: no window of {clip_len} frames at stride {seqs.stride} fits in "
+                             f"sequences of {sorted({len(m) for m in seqs.markers})} frames")
+        self.windows = np.array(rows, dtype=np.int64)  # (N, 2): sequence index, start frame
+        self._perms = rotation_permutations(rest)
+
+    def __len__(self) -> int:
+        return len(self.windows)
+
+    def frames(self, seq: int, start: int) -> np.ndarray:
+        f = start + self.seqs.stride * np.arange(self.clip_len)
+        return np.clip(f, 0, len(self.seqs.markers[seq]) - 1)  # only `centred` windows reach past an end
+
+    def gather(self, idx: np.ndarray, rotations: np.ndarray | None = None,
+               consistent: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Clips `idx` -> markers (B, L, 127, 2) float32 px and labels (B, L, 127) int8.
+
+        rotations: index 0..5 per clip (x 60 deg) or None. Sim labels are computed after rotating.
+        consistent: renumber nodes so each sits at its rest site (quirk 14 fixed).
+        """
+        idx = np.asarray(idx, dtype=np.int64)
+        rot = np.zeros(len(idx), np.int64) if rotations is None else np.asarray(rotations, np.int64)
+        markers, labels = [], []
+        for (seq, start), r in zip(self.windows[idx], rot):
+            f = self.frames(seq, start)
+            m = self.seqs.markers[seq][f]
+            if self.seqs.labels is not None:
+                lab = self.seqs.labels[seq][f]
+                if r:
+                    m = rotate_points(m, ROTATION_STEP_DEG * r)
+            else:
+                line = self.seqs.centreline[seq][f]
+                if r:
+                    m, line = rotate_points(m, ROTATION_STEP_DEG * r), rotate_points(line, ROTATION_STEP_DEG * r)
+                lab = sim_labels(m, line, self.seqs.contact[seq][f])
+            if consistent and r:
+                m, lab = m[:, self._perms[r]], lab[:, self._perms[r]]
+            markers.append(m)
+            labels.append(lab)
+        return np.stack(markers).astype(np.float32), np.stack(labels).astype(np.int8)

@@ -1,0 +1,52 @@
+"""Typed configuration of the model and of one training run; apps build these from Hydra at the edge."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Widths of SPEC §9: large s=248 / L_d=256 / k=128, compact 56 / 64 / 32."""
+
+    name: str = "large"
+    encoder_width: int = 248  # s
+    latent_width: int = 256  # L_d = s + type_dim
+    skip_width: int = 128  # k
+    type_dim: int = 8
+    input_dropout: float = 0.1
+    dropout: float = 0.3
+
+    def __post_init__(self):
+        if self.latent_width != self.encoder_width + self.type_dim:
+            raise ValueError(f"model '{self.name}': latent_width ({self.latent_width}) must equal "
+                             f"encoder_width + type_dim ({self.encoder_width} + {self.type_dim})")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """One training run (SPEC §10). `None` batches mean the whole split."""
+
+    batch_size: int = 16
+    epochs: int = 1
+    train_batches: int | None = 152
+    val_batches: int | None = 32
+    lr: float = 1e-4
+    weight_decay: float = 1e-4
+    focal_gamma: float = 3.0
+    norm_stats: str = "sample"  # sample (quirk 7: batch_size augmented clips) | full
+    norm_clips: int | None = None  # clips for `sample`; None = batch_size
+    rotation: str = "reference"  # none | reference (quirk 14) | consistent
+    schedule: str = "none"  # none | step (StepLR(step_size, gamma), quirk 8)
+    step_size: int = 64
+    step_gamma: float = 0.5
+    threshold: float = 0.5
+    device: str = "cpu"
+
+    def __post_init__(self):
+        if self.norm_stats not in ("sample", "full"):
+            raise ValueError(f"norm_stats must be 'sample' or 'full', got '{self.norm_stats}'")
+        if self.schedule not in ("none", "step"):
+            raise ValueError(f"schedule must be 'none' or 'step', got '{self.schedule}'")
+        if self.batch_size < 1 or self.epochs < 1:
+            raise ValueError(f"batch_size and epochs must be >= 1, got {self.batch_size}, {self.epochs}")

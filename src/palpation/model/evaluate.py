@@ -1,0 +1,37 @@
+"""Scoring clips with a trained model: central-frame probabilities and labels (SPEC §10, §11)."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from palpation.graph.batch import make_batch
+from palpation.graph.clips import ClipSet
+from palpation.graph.edges import ClipTopology
+from palpation.graph.normalise import NormStats
+from palpation.markers.lattice import N_MARKERS
+
+
+def central_slice(clip_len: int) -> slice:
+    """Marker nodes of the central frame k = L // 2 inside one clip."""
+    k = clip_len // 2
+    return slice(k * N_MARKERS, (k + 1) * N_MARKERS)
+
+
+@torch.no_grad()
+def predict(model: torch.nn.Module, clips: ClipSet, stats: NormStats, rest: np.ndarray,
+            topo: ClipTopology, batch_size: int, max_batches: int | None = None,
+            device: str = "cpu") -> tuple[np.ndarray, np.ndarray]:
+    """Central-frame (probs float32, labels int8), pooled in clip order; no augmentation."""
+    model.eval()
+    n = len(clips) if max_batches is None else min(len(clips), max_batches * batch_size)
+    probs, labels = [], []
+    centre = central_slice(topo.clip_len)
+    for start in range(0, n, batch_size):
+        idx = np.arange(start, min(start + batch_size, n))
+        markers, lab = clips.gather(idx)
+        batch = make_batch(markers, lab, rest, topo, stats, device)
+        p = torch.sigmoid(model(batch)).view(len(idx), topo.n_markers)[:, centre]
+        probs.append(p.cpu().numpy().ravel())
+        labels.append(lab.reshape(len(idx), -1)[:, centre].ravel())
+    return np.concatenate(probs).astype(np.float32), np.concatenate(labels).astype(np.int8)

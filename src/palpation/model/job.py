@@ -1,0 +1,103 @@
+"""One training job end to end: load data, fit, score the test set, write outputs, track the run.
+
+Outputs in `out_dir`: checkpoint.pt (weights + normalisation statistics + rest layout), scores.npz
+(`probs`, `labels` of the test central frames), pr.npz (the test PR curve) and metrics.json.
+"""
+
+from __future__ import annotations
+
+import logging
+import platform
+import time
+from contextlib import nullcontext
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from palpation import tracking
+from palpation.graph.clips import ClipSet
+from palpation.graph.edges import clip_topology, spatial_edges
+from palpation.graph.layout import rest_layout
+from palpation.graph.sources import load_dataset
+from palpation.io import save_json, save_npz
+from palpation.metrics.aggregate import pr_curve
+from palpation.metrics.classification import marker_metrics
+from palpation.model.checkpoint import checkpoint_bytes, save_checkpoint
+from palpation.model.config import ModelConfig, TrainConfig
+from palpation.model.evaluate import predict
+from palpation.model.stgnn import count_parameters
+from palpation.model.train import fit
+
+log = logging.getLogger(__name__)
+OUTPUTS = ("metrics.json", "scores.npz", "pr.npz", "checkpoint.pt")
+
+
+@dataclass(frozen=True)
+class TrainJob:
+    config_name: str
+    seed: int
+    clip_len: int
+    train_on: str
+    test_on: str
+    data: dict  # dataset name -> path
+    model: ModelConfig
+    train: TrainConfig
+    rest: str = "template"
+
+
+def device_name(device: str) -> str:
+    if device.startswith("cuda") and torch.cuda.is_available():
+        return torch.cuda.get_device_name(torch.device(device))
+    return f"cpu ({platform.processor() or platform.machine()}, {torch.get_num_threads()} threads)"
+
+
+def run_job(job: TrainJob, out_dir: str | Path, params: dict | None = None, track: bool = True,
+            tags: dict | None = None) -> dict:
+    """Train, score and write outputs; returns the metrics dict also saved as metrics.json."""
+    out_dir = Path(out_dir)
+    rest = rest_layout(job.rest)
+    topo = clip_topology(spatial_edges(rest), job.clip_len)
+    train = ClipSet(load_dataset(job.train_on, job.data[job.train_on], "train"), job.clip_len, rest)
+    val = ClipSet(load_dataset(job.train_on, job.data[job.train_on], "val"), job.clip_len, rest)
+    test = ClipSet(load_dataset(job.test_on, job.data[job.test_on], "test"), job.clip_len, rest)
+    log.info("%s seed %d L=%d: %d train / %d val / %d test clips", job.config_name, job.seed,
+             job.clip_len, len(train), len(val), len(test))
+    run_tags = {"config": job.config_name, "seed": str(job.seed), "clip_len": str(job.clip_len),
+                "model": job.model.name, "device": job.train.device, **(tags or {})}
+    run_name = f"{job.config_name}-L{job.clip_len}-seed{job.seed}"
+    ctx = tracking.start_run("train", params or asdict(job), run_name, run_tags) if track else nullcontext()
+    with ctx:
+        result = fit(train, val, rest, topo, job.model, job.train, job.seed,
+                     tracking.log_metrics if track else None)
+        t0 = time.perf_counter()
+        probs, labels = predict(result.model, test, result.stats, rest, topo, job.train.batch_size,
+                                device=job.train.device)
+        test_seconds = time.perf_counter() - t0
+        test_metrics = marker_metrics(probs, labels, job.train.threshold)
+        metrics = {
+            "config": job.config_name, "seed": job.seed, "clip_len": job.clip_len,
+            "model": job.model.name, "train_on": job.train_on, "test_on": job.test_on,
+            "test": test_metrics, "best_epoch": result.best_epoch,
+            "val_fg_iou": result.best_val_fg_iou, "history": result.history,
+            "n_clips": {"train": len(train), "val": len(val), "test": len(test)},
+            "alpha": result.stats.alpha, "n_parameters": count_parameters(result.model),
+            "checkpoint_bytes": checkpoint_bytes(result.model),
+            "train_seconds": result.train_seconds, "test_seconds": test_seconds,
+            "device": device_name(job.train.device),
+        }
+        save_npz(out_dir / "scores.npz", probs=probs, labels=labels)
+        save_npz(out_dir / "pr.npz", **pr_curve(probs, labels))
+        save_checkpoint(out_dir / "checkpoint.pt", result.model, job.model, result.stats, rest,
+                        extra={"config": job.config_name, "seed": job.seed, "train_on": job.train_on})
+        save_json(out_dir / "metrics.json", metrics)
+        if track:
+            tracking.log_metrics({f"test/{k}": v for k, v in test_metrics.items() if np.isfinite(v)})
+            tracking.log_metrics({"val/fg_iou_best": result.best_val_fg_iou,
+                                  "time/train_s": result.train_seconds})
+            for name in OUTPUTS:
+                tracking.log_artifact(out_dir / name)
+    log.info("test %s: AUROC %.4f AP %.4f FG %.4f BG %.4f", job.test_on, test_metrics["auroc"],
+             test_metrics["ap"], test_metrics["fg_iou"], test_metrics["bg_iou"])
+    return metrics

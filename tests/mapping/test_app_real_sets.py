@@ -1,0 +1,47 @@
+"""The app on the extracted real sets with label-derived scores (skipped until the data rules ran)."""
+
+import json
+
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_dir
+
+from palpation.apps.vessel_maps import run
+from palpation.io import save_npz
+from palpation.mapping.samples import central_frames
+from palpation.mapping.sources import meat_trials
+from palpation.paths import REPO_ROOT
+
+SILICONE = REPO_ROOT / "results" / "data" / "silicone" / "silicone.npz"
+MEAT = REPO_ROOT / "results" / "data" / "meat" / "meat.npz"
+pytestmark = pytest.mark.skipif(not (SILICONE.exists() and MEAT.exists()),
+                                reason="needs results/data/{silicone,meat} (rules silicone_set, meat_set)")
+
+
+def noisy_scores(markers, labels, path, seed, window="full"):
+    seq, frame = central_frames([len(m) for m in markers], 5, 1, window)
+    lab = np.concatenate([labels[s][f] for s, f in zip(seq, frame)]).astype(np.int8)
+    rng = np.random.default_rng(seed)
+    probs = np.clip(0.35 + 0.35 * lab + rng.normal(0, 0.15, lab.size), 0, 1).astype(np.float32)
+    save_npz(path, probs=probs, labels=lab)
+
+
+def test_silicone_and_meat_maps(tmp_path):
+    with np.load(SILICONE) as z:
+        noisy_scores(list(z["markers"]), list(z["labels"]), tmp_path / "sil.npz", 0)
+    trials = meat_trials(MEAT)
+    noisy_scores([t["markers"] for t in trials], [t["labels"] for t in trials], tmp_path / "meat.npz", 1, "centred")
+    with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
+        cfg = compose(config_name="vessel_maps", overrides=[
+            "configs=[A-to-B,A-to-C]", f"scores.A-to-B={tmp_path / 'sil.npz'}",
+            f"scores.A-to-C={tmp_path / 'meat.npz'}", f"data.silicone={SILICONE}", f"data.meat={MEAT}",
+            f"out_dir={tmp_path / 'maps'}", "tracking=false"])
+    result = run(cfg)
+    sil, meat = result["configs"]["A-to-B"], result["configs"]["A-to-C"]
+    assert sil["grid"]["rows"]["size_px"] == 100 and sil["dropped_samples"] == 0 and sil["n_samples"] == 120
+    assert len(meat["maps"]) == 10 and meat["grid"]["rows"]["world"] == "x" and meat["n_samples"] == 219
+    assert all(c["mean_mm"] < 3.5 for c in meat["meta"]["pose_check"].values())
+    assert 0.15 < sil["photo"]["iou_video_photo"] < 0.5
+    check = json.loads((tmp_path / "maps" / "silicone_pose_check.json").read_text())
+    assert check["check"]["dots_to_photo_mm"]["mean"] < 1.0
+    assert (tmp_path / "maps" / "A-to-B_photo_confusion_big.png").exists()
