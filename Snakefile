@@ -10,6 +10,9 @@ include: "workflow/rules/silicone.smk"
 include: "workflow/rules/meat.smk"
 include: "workflow/rules/twin.smk"
 include: "workflow/rules/simulate.smk"
+include: "workflow/rules/dataset.smk"
+include: "workflow/rules/train.smk"
+include: "workflow/rules/maps.smk"
 
 
 rule all:
@@ -21,6 +24,8 @@ rule all:
         rules.meat_set.output,
         rules.data_summary.output,
         rules.render_twin.output,
+        TRAIN_REPORT_FILES,
+        rules.vessel_maps.output,
 
 
 rule bench:

@@ -34,3 +34,13 @@ def test_two_processes_create_the_store_together(results_tmp):
     runs = mlflow.search_runs(experiment_names=["concurrency"])
     assert len(runs) == 2
     assert set(runs["tags.git_commit"]) != {""}
+
+
+def test_artifacts_go_under_results_not_cwd(results_tmp, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    art = tmp_path / "a.txt"
+    art.write_text("x")
+    with tracking.start_run("artefacts"):
+        tracking.log_artifact(art)
+    assert not (tmp_path / "mlruns").exists()
+    assert list((results_tmp / "mlartifacts" / "artefacts").rglob("a.txt"))

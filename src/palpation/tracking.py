@@ -26,6 +26,10 @@ def tracking_uri() -> str:
     return f"sqlite:///{(results_dir() / 'mlflow.db').resolve()}"
 
 
+def artifact_root(stage: str) -> str:
+    return (results_dir() / "mlartifacts" / stage).resolve().as_uri()
+
+
 def _lock_path(uri: str) -> Path:
     if uri.startswith("sqlite:///"):
         db = Path(uri[len("sqlite:///"):])
@@ -65,6 +69,9 @@ def start_run(stage: str, params: Mapping[str, Any] | None = None, run_name: str
     lock.parent.mkdir(parents=True, exist_ok=True)
     with FileLock(str(lock), timeout=120):
         mlflow.set_tracking_uri(uri)
+        if mlflow.get_experiment_by_name(stage) is None:
+            # artefacts beside the store, not in ./mlruns of whatever folder the job started in
+            mlflow.create_experiment(stage, artifact_location=artifact_root(stage))
         mlflow.set_experiment(stage)
     all_tags = {
         "git_commit": git_commit(),

@@ -18,3 +18,6 @@ VIDEOS = f"{REF}/videos"
 def hydra_dir(path):
     """Pin Hydra's run folder next to a rule's output so .hydra/config.yaml stays with it."""
     return f"hydra.run.dir={Path(path).parent} hydra.output_subdir=.hydra/{Path(path).stem}"
+
+# Every job knows its profile (MLflow tags runs with it) and writes no MLflow artefacts into ./mlruns.
+shell.prefix(f"set -euo pipefail; export PALPATION_PROFILE={PROFILE}; ")
