@@ -10,7 +10,7 @@ rule meat_set:
     output:
         npz="results/data/meat/meat.npz",
         json="results/data/meat/meat.json",
-        png=report("results/data/meat/meat_overview.png", category="Real data"),
+        png=report("results/data/meat/meat_overview.png", caption="../report/meat_overview.rst", category="Real data"),
         pdf="results/data/meat/meat_overview.pdf",
     params:
         hydra=lambda wildcards, output: hydra_dir(output.npz),

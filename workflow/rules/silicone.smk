@@ -11,7 +11,7 @@ rule silicone_set:
     output:
         npz="results/data/silicone/silicone.npz",
         json="results/data/silicone/silicone.json",
-        png=report("results/data/silicone/silicone_overview.png", category="Real data"),
+        png=report("results/data/silicone/silicone_overview.png", caption="../report/silicone_overview.rst", category="Real data"),
         pdf="results/data/silicone/silicone_overview.pdf",
     params:
         hydra=lambda wildcards, output: hydra_dir(output.npz),

@@ -51,7 +51,7 @@ rule render_twin:
         canonical=rules.simulate_canonical.output.manifest,
         slide=rules.simulate_vessel_slide.output.manifest,
     output:
-        png=report("results/twin/render/markers.png", category="Twin"),
+        png=report("results/twin/render/markers.png", caption="../report/twin_render.rst", category="Twin"),
         pdf="results/twin/render/markers.pdf",
         mp4=expand(
             "results/twin/render/{name}.mp4",

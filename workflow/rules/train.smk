@@ -53,8 +53,10 @@ def yaml_list(values):
     return "[" + ",".join(str(v) for v in values) + "]"
 
 
+_CAPTIONS = {"fig6_pr_curves.png": "fig6_pr_curves.rst", "seed_sweep.csv": "seed_sweep.rst"}
 TRAIN_REPORT_FILES = [
-    f"{TRAIN_REPORT}/{name}"
+    (report(f"{TRAIN_REPORT}/{name}", caption=f"../report/{_CAPTIONS[name]}", category="ST-GNN")
+     if name in _CAPTIONS else f"{TRAIN_REPORT}/{name}")
     for name in ("seed_sweep.csv", "seed_sweep.md", "table4_markers.csv", "table4_markers.md",
                  "fig6_pr_curves.png", "fig6_pr_curves.pdf", "bench_train.json")
 ] + ([f"{TRAIN_REPORT}/clip_len_ablation.csv", f"{TRAIN_REPORT}/table3_clip_len.md"]
