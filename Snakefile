@@ -31,3 +31,15 @@ rule all:
 rule bench:
     input:
         rules.bench_twin.output,
+
+
+onstart:
+    from palpation.report.reproduction import stamp_start
+
+    stamp_start()
+
+
+onsuccess:
+    from palpation.report.reproduction import record_run
+
+    record_run(PROFILE, config["device"])
