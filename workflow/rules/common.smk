@@ -1,4 +1,6 @@
 # Shared settings: the active profile's workflow config and helpers for calling Hydra apps.
+import sys
+
 import yaml
 from pathlib import Path
 
@@ -9,7 +11,7 @@ if not _profile_file.exists():
 for _key, _value in yaml.safe_load(_profile_file.read_text()).items():
     config.setdefault(_key, _value)  # command-line --config wins
 
-PY = "python -m"
+PY = f"{sys.executable} -m"  # the interpreter running Snakemake (venv or GPU node)
 REF = "data/reference"
 PHOTOS = f"{REF}/photos/flat-tip"
 VIDEOS = f"{REF}/videos"

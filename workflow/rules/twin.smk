@@ -14,5 +14,5 @@ rule mesh:
     log:
         "results/logs/twin/mesh_{resolution}.log",
     shell:
-        "python -m palpation.apps.mesh twin/mesh={wildcards.resolution}"
+        "{PY} palpation.apps.mesh twin/mesh={wildcards.resolution}"
         " out.mesh={output.mesh} out.stats={output.stats} {params.hydra} > {log} 2>&1"
