@@ -102,3 +102,15 @@ def test_label_rule():
     assert labels.dtype == np.int8 and labels.shape == (2, 127)
     assert labels[0, 0] == 1 and labels[0, 1] == 0 and labels[0, 2:].sum() == 0
     assert labels[1].sum() == 0  # no contact, no positives
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_kernel_is_precise_near_the_optical_axis(device, coarse, template):
+    """The centre marker sits near the axis, where float32 acos(z/|p|) was ~0.1 px off."""
+    b = bind_markers(coarse.nodes, coarse.dome_nodes, template)
+    schedule, lengths = padded_schedule([plan_trajectory("press")])
+    proj = MarkerProjector(b, schedule, coarse.n_nodes, np.array([0]), lengths, device=device)
+    x = posed(coarse, schedule[0]) + np.random.default_rng(1).normal(scale=2e-5, size=(1, coarse.n_nodes, 3))
+    proj.extract(wp.array(x.reshape(-1, 3).astype(np.float32), dtype=wp.vec3, device=device), 0)
+    ref = project_markers_np(b, x, schedule[0])[0]
+    assert np.abs(proj.results()[0][0, 0] - ref).max() < 2e-3

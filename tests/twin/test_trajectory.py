@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from palpation.twin.trajectory import (
-    FRAME_DT_S, PHANTOM_TOP_M, SPEED_CAP_M_S, padded_schedule, plan_trajectory, rotation_from_start_deg,
+    CANONICAL_ANGLE_DEG, CANONICAL_DEPTH_MM, FRAME_DT_S, PHANTOM_TOP_M, SPEED_CAP_M_S, padded_schedule, plan_trajectory, rotation_from_start_deg,
     tip_positions, waypoints)
 
 # kind: (frames, recorded, press depth mm, rotation deg, path mm)
@@ -69,3 +69,35 @@ def test_padding_holds_last_pose():
 def test_unknown_kind_is_rejected():
     with pytest.raises(ValueError, match="unknown trajectory kind 'poke'"):
         plan_trajectory("poke")
+
+
+@pytest.mark.parametrize("kind, depth_mm, angle_deg, end_depth_mm, end_angle_deg", [
+    ("press", 2.0, None, 1.2, 0.0),  # the last waypoint's reaching frame stops ~0.8 mm short (errata)
+    ("twist_z", 4.0, 90.0, 4.0, 89.3),  # the file name's angle (quirk 5)
+    ("twist_x", 3.0, 10.0, 3.0, 9.42),
+    ("slide", 2.0, None, 2.0, 0.0),
+])
+def test_depth_and_angle_from_photo_names(kind, depth_mm, angle_deg, end_depth_mm, end_angle_deg):
+    traj = plan_trajectory(kind, depth_mm=depth_mm, angle_deg=angle_deg)
+    tip = tip_positions(traj)
+    assert (PHANTOM_TOP_M - tip[-1, 2]) * 1e3 == pytest.approx(end_depth_mm, abs=0.1)
+    assert rotation_from_start_deg(traj)[-1] == pytest.approx(end_angle_deg, abs=0.1)
+
+
+def test_canonical_geometry_is_the_default():
+    for kind in EXPECTED:
+        a, b = plan_trajectory(kind), plan_trajectory(kind, depth_mm=CANONICAL_DEPTH_MM[kind],
+                                                      angle_deg=CANONICAL_ANGLE_DEG.get(kind))
+        assert np.allclose(a.T_BA, b.T_BA, atol=1e-12)
+    assert CANONICAL_ANGLE_DEG["twist_z"] == 30.0  # the reference's simulation, not the file name's 90
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(kind="press", depth_mm=-1.0), "depth_mm=-1.0"),
+    (dict(kind="slide", depth_mm=12.0), "depth_mm=12.0"),
+    (dict(kind="press", angle_deg=10.0), "has no twist angle"),
+    (dict(kind="twist_x", angle_deg=float("nan")), "finite angle"),
+])
+def test_bad_geometry_is_rejected(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        plan_trajectory(**kwargs)

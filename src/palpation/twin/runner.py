@@ -4,13 +4,16 @@ Each env has its own interaction, heading and contact/material parameters. All p
 planned up front (the controller only reads the kinematic copy) and padded to the longest: an env
 that has finished holds its last pose and records nothing more. Markers and the vessel centreline
 are projected on the device every frame into per-env windows (SPEC quirk 6 fixed), and copied to the
-host once at the end; only the contact flags and the periodic health check cross per frame.
+host once at the end. The whole schedule is uploaded once; a frame is one graph launch (physics,
+contact-flag record, markers), and only the failure flags are read, every READ_FAILED_EVERY frames.
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
@@ -18,11 +21,14 @@ import warp as wp
 from tqdm.auto import tqdm
 
 from palpation.twin.config import TwinConfig
-from palpation.twin.markers import MarkerBinding, MarkerProjector, bind_markers, centreline_A, marker_labels
+from palpation.twin.contact import record_contact_flags
+from palpation.twin.markers import (ImageSimilarity, MarkerBinding, MarkerProjector, bind_markers,
+                                    bind_markers_through, centreline_A, marker_labels)
 from palpation.twin.mesh import SensorMesh
 from palpation.twin.output import FailedRecord, TrajectoryRecord
 from palpation.twin.simulator import BatchedTwin
-from palpation.twin.trajectory import Trajectory, padded_schedule, plan_trajectory
+from palpation.twin.trajectory import (Trajectory, mount_offset, padded_schedule, plan_trajectories, waypoints,
+                                       with_mount)
 
 log = logging.getLogger(__name__)
 READ_FAILED_EVERY = 20  # frames between host reads of the failure flags (the reference's interval)
@@ -98,11 +104,16 @@ def env_params(requests: list[EnvRequest]) -> dict[str, np.ndarray]:
 
 def plan_requests(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest],
                   max_frames: int | None = None) -> list[Trajectory]:
-    """The pose schedule of each (resolved) request, cut to `max_frames` if given."""
+    """The pose schedule of each (resolved) request, cut to `max_frames` if given.
+
+    A mount offset in the config (cfg.mount, residual loop) moves the sensor off the commanded poses."""
     tip_B = tip_node_B(mesh)
-    return [truncate(plan_trajectory(r.kind, r.heading_offset_deg, tip_B_m=tip_B, frame_dt_s=cfg.frame_dt,
-                                     depth_mm=r.depth_mm, angle_deg=r.angle_deg), max_frames)
-            for r in requests]
+    specs = [(r.kind, r.heading_offset_deg, r.depth_mm, r.angle_deg) for r in requests]
+    trajs = [truncate(t, max_frames) for t in plan_trajectories(specs, tip_B, cfg.frame_dt)]  # all in lockstep
+    if not cfg.mount.is_identity:
+        T_m = mount_offset(cfg.mount.dz, cfg.mount.tilt_x_deg, cfg.mount.tilt_y_deg)
+        trajs = [with_mount(t, T_m) for t in trajs]
+    return trajs
 
 
 def record_windows(trajs: list[Trajectory], requests: list[EnvRequest]) -> tuple[np.ndarray, np.ndarray]:
@@ -134,9 +145,14 @@ def run_batch(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest],
     if not requests:
         raise ValueError("run_batch needs at least one EnvRequest")
     device = wp.get_device(device or cfg.device)
+    image = ImageSimilarity.from_config(cfg.camera)  # camera error (residual loop); identity by default
     if binding is None:
         from palpation.markers.template import rest_template
         binding = bind_markers(mesh.nodes, mesh.dome_nodes, rest_template())
+    through = None
+    if not image.is_identity:  # the true camera binds the same template to other nodes
+        through = bind_markers_through(mesh.nodes, mesh.dome_nodes, binding.template_px, image)
+        binding = replace(through.binding, rest_px=through.anchor_px)
     reqs = [r.resolved(cfg) for r in requests]
     trajs = plan_requests(mesh, cfg, reqs, max_frames)
     schedule, lengths = padded_schedule(trajs)
@@ -147,16 +163,21 @@ def run_batch(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest],
     sim = BatchedTwin(mesh, n, cfg, env_params(reqs), device=device)
     sim.reset(np.stack([t.T_BA0 for t in trajs]))
     proj = MarkerProjector(binding, schedule, mesh.n_nodes, first, end, device=device)
-    contact_dev = wp.zeros(n_frames * n, dtype=wp.int32, device=device)  # copied on device, read once
+    contact_dev = wp.zeros((n_frames, n), dtype=wp.int32, device=device)  # written on device, read once
+
+    def per_frame(frame_index, offset):  # captured with the frame: flags and markers, no host work
+        wp.launch(record_contact_flags, dim=n, device=device, inputs=[sim.contact_flag, frame_index, offset],
+                  outputs=[contact_dev])
+        proj.extract_at(sim.x, frame_index, offset)
+
+    sim.set_schedule(schedule, per_frame)
     failed_at = np.full(n, -1)
     # the simulator's failure flag is sticky, so reading it sparsely (plus at each env's last frame,
     # to tell a failure inside an env's own frames from one after it finished) loses nothing
     checks = set(range(READ_FAILED_EVERY - 1, n_frames, READ_FAILED_EVERY)) | set((lengths - 1).tolist())
     checked_to = 0  # frames [0, checked_to) are covered by earlier checks
     for f in tqdm(range(n_frames), desc=f"twin x{n}", unit="frame", disable=not progress, leave=False):
-        sim.step_frame(schedule[f])
-        wp.copy(contact_dev, sim.contact_flag, dest_offset=f * n, count=n)
-        proj.extract(sim.x, f)
+        sim.step_scheduled()  # one graph launch
         if f in checks:
             # blame only envs still inside their own frames since the last check
             bad = sim.failed() & (failed_at < 0) & (lengths > checked_to)
@@ -165,8 +186,18 @@ def run_batch(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest],
             if np.all((failed_at >= 0) | (lengths <= checked_to)):
                 break  # every env has either failed or finished
     markers, centre = proj.results()
-    contact = contact_dev.numpy().reshape(n_frames, n).astype(bool)
+    if through is not None:  # the projector ran the nominal camera: map into the true image
+        markers = through.markers(markers).astype(np.float32)
+        centre = image.apply(centre).astype(np.float32)
+    contact = contact_dev.numpy().astype(bool)
     wall = time.perf_counter() - start
+
+    def labels(i):  # numpy releases the GIL: envs in parallel threads (~10 ms per recorded slide each)
+        frames = np.arange(first[i], end[i])
+        return marker_labels(markers[: len(frames), i], centre[: len(frames), i], contact[frames, i])
+
+    with ThreadPoolExecutor(max_workers=min(16, os.cpu_count() or 1)) as pool:
+        env_labels = dict(zip(np.flatnonzero(failed_at < 0), pool.map(labels, np.flatnonzero(failed_at < 0))))
 
     records, failed = [], []
     line_A = centreline_A()
@@ -183,7 +214,7 @@ def run_batch(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest],
         m, c, k = markers[: len(frames), i], centre[: len(frames), i], contact[frames, i]
         records.append(TrajectoryRecord(
             name=name, kind=req.kind, seed=req.seed, params=params, markers=m, centreline_px=c,
-            labels=marker_labels(m, c, k), contact=k, T_BA=schedule[frames, i], frame_index=frames,
+            labels=env_labels[i], contact=k, T_BA=schedule[frames, i], frame_index=frames,
             centreline_A=line_A, rest_markers_px=binding.rest_px.astype(np.float32)))
     return BatchResult(records=records, failed=failed, frames=f + 1, wall_s=wall, failed_mask=failed_at >= 0)
 
@@ -208,7 +239,7 @@ def simulate_states(mesh: SensorMesh, cfg: TwinConfig, requests: list[tuple[str,
             raise ValueError(f"request {i} ({kind}): unknown parameters {sorted(unknown)}; "
                              f"use {sorted(allowed)}")
         env = EnvRequest(kind=kind, record="last", name=f"state_{i:04d}", **params)
-        plan_requests(mesh, cfg, [env.resolved(cfg)], max_frames=1)  # bad kind/geometry: fail now
+        waypoints(env.kind, env.heading_offset_deg, env.depth_mm, env.angle_deg)  # bad kind/geometry: fail now
         envs.append(env)
     groups = [list(range(len(envs)))]
     if split_by_kind:

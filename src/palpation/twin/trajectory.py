@@ -11,7 +11,7 @@ x -> R_A (x - t0) + t0 + v dt about the pivot t0 = the first waypoint.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -77,7 +77,8 @@ def geometry(kind: str, depth_mm: float | None = None, angle_deg: float | None =
         raise ValueError(f"unknown trajectory kind '{kind}'; expected one of {KINDS}")
     depth = CANONICAL_DEPTH_MM[kind] if depth_mm is None else float(depth_mm)
     if not 0.0 <= depth <= MAX_DEPTH_MM:
-        raise ValueError(f"{kind}: depth_mm={depth_mm} must lie in [0, {MAX_DEPTH_MM}] mm below the phantom top")
+        raise ValueError(f"{kind}: depth_mm={depth_mm} must lie in [0, {MAX_DEPTH_MM}] mm below the "
+                         "phantom top")
     if kind not in CANONICAL_ANGLE_DEG:
         if angle_deg is not None:
             raise ValueError(f"{kind}: has no twist angle, got angle_deg={angle_deg}; pass None")
@@ -129,40 +130,82 @@ def plan_trajectory(kind: str, heading_offset_deg: float = 0.0, tip_B_m: np.ndar
     run stops on the frame that reaches the last waypoint; that frame still applies its command.
     `depth_mm` / `angle_deg` (None = SPEC's canonical values) come from a photo's file name.
     """
-    table = waypoints(kind, heading_offset_deg, depth_mm, angle_deg)
+    return plan_trajectories([(kind, heading_offset_deg, depth_mm, angle_deg)], tip_B_m, frame_dt_s)[0]
+
+
+def plan_trajectories(specs: list[tuple], tip_B_m: np.ndarray | None = None,
+                      frame_dt_s: float = FRAME_DT_S) -> list[Trajectory]:
+    """`plan_trajectory` for many (kind, heading_offset_deg, depth_mm, angle_deg) at once.
+
+    The controllers run in lockstep on stacked rotations, one numpy/scipy call per step for all of
+    them (a per-trajectory loop cost ~30 ms per slide in scipy call overhead). Each env's result is
+    the same as planning it alone: every operation is row-wise.
+    """
+    tables = [waypoints(kind, heading, depth, angle) for kind, heading, depth, angle in specs]
+    n = len(tables)
     tip_B = np.zeros(3) if tip_B_m is None else np.asarray(tip_B_m, dtype=np.float64)
-    pivot = table[0].position_m
-    rotation = table[0].rotation
-    translation = table[0].position_m - rotation.apply(tip_B)
-    T_BA0 = pose_matrix(rotation, translation)
+    tips = np.tile(tip_B, (n, 1))  # scipy wants a writable array
+    count = np.array([len(t) for t in tables])
+    base = np.concatenate([[0], np.cumsum(count)[:-1]])  # first row of each env's table
+    table_pos = np.array([w.position_m for t in tables for w in t])
+    table_rot = Rotation.concatenate([w.rotation for t in tables for w in t])
+    pivot = table_pos[base]
+    rotation = table_rot[base]
+    translation = pivot - _apply(rotation, tips)
+    T_BA0 = _pose_matrices(rotation, translation)
     max_step_rad = np.radians(RATE_CAP_DEG_S) * frame_dt_s
-    poses, target, done = [], 0, False
-    while not done:
+    target = np.zeros(n, int)
+    active = np.ones(n, bool)  # still planning (its last frame not yet reached)
+    n_frames = np.zeros(n, int)
+    poses = []
+    while active.any():
         if len(poses) >= MAX_FRAMES:
-            raise ValueError(f"{kind}: waypoint {target} not reached within {MAX_FRAMES} frames; "
+            i = int(np.flatnonzero(active)[0])
+            raise ValueError(f"{specs[i][0]}: waypoint {target[i]} not reached within {MAX_FRAMES} frames; "
                              "check the waypoint table and controller limits")
-        wp = table[target]
-        rotvec = (wp.rotation * rotation.inv()).as_rotvec()
-        angle = np.linalg.norm(rotvec)
-        step = Rotation.from_rotvec(rotvec * min(1.0, max_step_rad / angle) if angle > 0 else np.zeros(3))
-        error = wp.position_m - (rotation.apply(tip_B) + translation)
+        row = base + target
+        rotvec = (table_rot[row] * rotation.inv()).as_rotvec()
+        angle = np.linalg.norm(rotvec, axis=1)
+        scale = np.minimum(1.0, np.divide(max_step_rad, angle, out=np.zeros(n), where=angle > 0))
+        step_vec = np.where((angle > 0)[:, None], rotvec * scale[:, None], 0.0)
+        error = table_pos[row] - (_apply(rotation, tips) + translation)
         velocity = GAIN_PER_S * error
-        speed = np.linalg.norm(velocity)
-        if speed > SPEED_CAP_M_S:
-            velocity *= SPEED_CAP_M_S / speed
-        if np.linalg.norm(error) < REACH_TOL_M and np.degrees(angle) < REACH_TOL_DEG:
-            if target < len(table) - 1:  # intermediate waypoint: advance, no motion this frame
-                target += 1
-                step, velocity = Rotation.identity(), np.zeros(3)
-            else:  # errata: the last waypoint's reaching frame still moves
-                done = True
+        speed = np.linalg.norm(velocity, axis=1)
+        capped = speed > SPEED_CAP_M_S
+        velocity[capped] *= (SPEED_CAP_M_S / speed[capped])[:, None]
+        reached = (np.linalg.norm(error, axis=1) < REACH_TOL_M) & (np.degrees(angle) < REACH_TOL_DEG)
+        advance = reached & (target < count - 1)  # intermediate waypoint: advance, no motion this frame
+        target[advance] += 1
+        step_vec[advance], velocity[advance] = 0.0, 0.0
+        step = Rotation.from_rotvec(step_vec)
         rotation = step * rotation
-        translation = step.apply(translation - pivot) + pivot + velocity * frame_dt_s
-        poses.append(pose_matrix(rotation, translation))
-    heading = -90.0 + heading_offset_deg if kind == "slide" else float("nan")
-    return Trajectory(kind=kind, T_BA0=T_BA0, T_BA=np.stack(poses),
-                      record_from=SLIDE_RECORD_AFTER + 1 if kind == "slide" else 0,
-                      heading_deg=heading, waypoints=table, frame_dt_s=frame_dt_s)
+        translation = _apply(step, translation - pivot) + pivot + velocity * frame_dt_s
+        poses.append(_pose_matrices(rotation, translation))
+        n_frames[active] += 1
+        active &= ~(reached & ~advance)  # errata: the last waypoint's reaching frame still moves
+    poses = np.stack(poses, axis=1) if poses else np.zeros((n, 0, 4, 4))
+    out = []
+    for i, ((kind, heading, _, _), table) in enumerate(zip(specs, tables)):
+        out.append(Trajectory(kind=kind, T_BA0=T_BA0[i], T_BA=poses[i, : n_frames[i]].copy(),
+                              record_from=SLIDE_RECORD_AFTER + 1 if kind == "slide" else 0,
+                              heading_deg=-90.0 + heading if kind == "slide" else float("nan"),
+                              waypoints=table, frame_dt_s=frame_dt_s))
+    return out
+
+
+def _apply(rotation: Rotation, vectors: np.ndarray) -> np.ndarray:
+    """R v row by row; scipy's stacked apply rounds differently for 1 and n rows."""
+    m = rotation.as_matrix()
+    return (m[:, :, 0] * vectors[:, None, 0] + m[:, :, 1] * vectors[:, None, 1]
+            + m[:, :, 2] * vectors[:, None, 2])
+
+
+def _pose_matrices(rotation: Rotation, translation_m: np.ndarray) -> np.ndarray:
+    T = np.zeros((len(translation_m), 4, 4))
+    T[:, :3, :3] = rotation.as_matrix()
+    T[:, :3, 3] = translation_m
+    T[:, 3, 3] = 1.0
+    return T
 
 
 def tip_positions(traj: Trajectory, tip_B_m: np.ndarray | None = None) -> np.ndarray:
@@ -188,3 +231,21 @@ def padded_schedule(trajs: list[Trajectory]) -> tuple[np.ndarray, np.ndarray]:
         out[: t.n_frames, i] = t.T_BA
         out[t.n_frames:, i] = t.T_BA[-1]
     return out, lengths
+
+
+def mount_offset(dz_m: float = 0.0, tilt_x_deg: float = 0.0, tilt_y_deg: float = 0.0) -> np.ndarray:
+    """(4, 4) body-frame offset of the real sensor from the commanded one (twin.config.MountConfig).
+
+    Tilts turn about the tip (the body origin); dz > 0 moves the sensor along +z_B, out of the dome,
+    i.e. deeper into the phantom than commanded.
+    """
+    return pose_matrix(Rotation.from_euler("xy", [tilt_x_deg, tilt_y_deg], degrees=True),
+                       np.array([0.0, 0.0, dz_m]))
+
+
+def with_mount(traj: Trajectory, T_mount: np.ndarray) -> Trajectory:
+    """The schedule the sensor really follows: every commanded pose composed with the mount offset.
+
+    The controller only sees the commanded (kinematic) pose, so the offset is applied after planning.
+    """
+    return replace(traj, T_BA0=traj.T_BA0 @ T_mount, T_BA=traj.T_BA @ T_mount)

@@ -1,0 +1,99 @@
+"""Typed calibration settings (Hydra structured config `base_calibration`, conf/calibration/*.yaml).
+
+Parameter names are those of the registry in calibration.params, in the units it lists (E in Pa,
+k_n_ref in the reference's x5 units, ...). Everything is checked by `CalibrationConfig.validate`
+and `calibration.params.check_space` before the twin is built.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional
+
+from hydra.core.config_store import ConfigStore
+
+from palpation.calibration.objective import ANGLE_SOURCES, GEOMETRIES, INTERACTIONS
+from palpation.calibration.search import ParamSpec
+
+
+@dataclass
+class SearchParam:
+    name: str = "E"
+    low: float = 1e5
+    high: float = 1e6
+    log: bool = True
+
+
+@dataclass
+class PaperParams:
+    """The paper's adopted twin (SPEC §6.4): E rounded to 881.4 kPa, k_n 94,908 reference units."""
+
+    E: float = 881400.0
+    k_n_ref: float = 94908.307
+
+
+@dataclass
+class CalibrationConfig:
+    objective: str = "project"  # project (mean photo MAE, minimised) | reference (SPEC §6.2, maximised)
+    params: list[SearchParam] = field(default_factory=lambda: [SearchParam()])
+    fixed: dict[str, float] = field(default_factory=dict)  # registry name -> value held in every trial
+    interactions: list[str] = field(default_factory=lambda: list(INTERACTIONS))
+    holdout: Optional[str] = None  # one interaction left out of the fit (reported, not fitted)
+    geometry: str = "photo"  # photo: depth/angle from the file names; canonical: SPEC §4.1
+    twist_z_angle: str = "reference"  # reference: 30 deg (quirk 5); filename: 90 deg
+    sampler: str = "gp"  # gp | tpe | random (calibration.search.make_sampler)
+    seed: int = 42
+    n_trials: int = 10
+    n_startup: int = 5  # random trials, proposed and simulated as one batch
+    batch_size: int = 1  # proposals per batch after the startup (1 = the reference's sequential GP)
+    worst_px: float = 165.0  # project: the score of a diverged trial (3 marker spacings)
+    split_by_kind: str = "auto"  # one twin run per interaction: auto (= on CPU), true, false
+    # reference objective (SPEC §6.2)
+    heading_seed: int = 42  # the one heading draw per run: +8.22 deg
+    trigger_px: float = 55.0
+    cap_frames: int = 400
+    norm_px: float = 165.0
+    worst_value: float = -1.0
+    paper: PaperParams = field(default_factory=PaperParams)
+    max_frames: Optional[int] = None  # cut every trajectory (smoke tests only)
+
+    def space(self) -> list[ParamSpec]:
+        return [ParamSpec(p.name, float(p.low), float(p.high), bool(p.log)) for p in self.params]
+
+    def fit_interactions(self) -> list[str]:
+        """The photos the objective scores (the reference objective scores only the slide photo)."""
+        if self.objective == "reference":
+            return ["slide"]
+        return [k for k in self.interactions if k != self.holdout]
+
+    def validate(self) -> "CalibrationConfig":
+        if self.objective not in ("project", "reference"):
+            raise ValueError(f"calibration.objective must be 'project' or 'reference', "
+                             f"got '{self.objective}'")
+        if self.holdout is not None and self.holdout not in self.interactions:
+            raise ValueError(f"calibration.holdout='{self.holdout}' is not one of calibration.interactions "
+                             f"{list(self.interactions)}")
+        if not self.fit_interactions():
+            raise ValueError("calibration: holding out the only interaction leaves nothing to fit")
+        if self.geometry not in GEOMETRIES or self.twist_z_angle not in ANGLE_SOURCES:
+            raise ValueError(f"calibration.geometry must be one of {GEOMETRIES} and twist_z_angle one of "
+                             f"{ANGLE_SOURCES}, got '{self.geometry}', '{self.twist_z_angle}'")
+        if self.n_trials < 1 or self.n_startup < 0 or self.batch_size < 1:
+            raise ValueError(f"calibration: need n_trials >= 1, n_startup >= 0, batch_size >= 1, got "
+                             f"{self.n_trials}, {self.n_startup}, {self.batch_size}")
+        if str(self.split_by_kind).lower() not in ("auto", "true", "false"):
+            raise ValueError(f"calibration.split_by_kind must be auto, true or false, "
+                             f"got {self.split_by_kind}")
+        return self
+
+    def split(self, device: str) -> bool:
+        mode = str(self.split_by_kind).lower()
+        return device.startswith("cpu") if mode == "auto" else mode == "true"
+
+
+def register_configs() -> None:
+    cs = ConfigStore.instance()
+    cs.store(group="calibration", name="base_calibration", node=CalibrationConfig)
+
+
+register_configs()
