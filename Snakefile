@@ -10,6 +10,7 @@ include: "workflow/rules/silicone.smk"
 include: "workflow/rules/meat.smk"
 include: "workflow/rules/twin.smk"
 include: "workflow/rules/simulate.smk"
+include: "workflow/rules/calibrate.smk"
 include: "workflow/rules/dataset.smk"
 include: "workflow/rules/train.smk"
 include: "workflow/rules/maps.smk"
@@ -24,6 +25,7 @@ rule all:
         rules.meat_set.output,
         rules.data_summary.output,
         rules.render_twin.output,
+        rules.calibrate.output,
         TRAIN_REPORT_FILES,
         rules.vessel_maps.output,
 
@@ -31,6 +33,7 @@ rule all:
 rule bench:
     input:
         rules.bench_twin.output,
+        rules.bench_calibration.output,
 
 
 onstart:

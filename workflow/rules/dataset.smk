@@ -6,6 +6,7 @@ DATASET = config.get("dataset", {})
 rule simulate_dataset:
     input:
         mesh=TWIN_MESH,
+        fit=TWIN_FIT,  # the calibrated twin sets every parameter the draws leave alone
     output:
         manifest="results/sim/dataset/manifest.json",
     params:
@@ -20,5 +21,5 @@ rule simulate_dataset:
         "results/logs/sim/simulate_dataset.log",
     shell:
         "{PY} palpation.apps.simulate set=randomised n_pairs={params.n_pairs} seed={params.seed}"
-        " {params.twin} mesh={input.mesh} out.dir={params.outdir} progress=false"
+        " {params.twin} {TWIN_FIT_ARGS} mesh={input.mesh} out.dir={params.outdir} progress=false"
         " {params.hydra} > {log} 2>&1"
