@@ -27,7 +27,7 @@ def dry_run(tmp_path: Path, *args: str) -> str:
 
 
 def test_vessel_maps_rule_takes_every_seed_and_the_test_sets(tmp_path):
-    text = dry_run(tmp_path, "--config", "maps={configs: [C-to-B]}")
+    text = dry_run(tmp_path, "--config", "profile=paper", "maps={configs: [C-to-B]}")  # 5 seeds
     assert "rule vessel_maps:" in text
     for seed in range(5):
         assert f"results/train/C-to-B/L5/seed{seed}/scores.npz" in text
