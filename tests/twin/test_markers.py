@@ -114,3 +114,17 @@ def test_kernel_is_precise_near_the_optical_axis(device, coarse, template):
     proj.extract(wp.array(x.reshape(-1, 3).astype(np.float32), dtype=wp.vec3, device=device), 0)
     ref = project_markers_np(b, x, schedule[0])[0]
     assert np.abs(proj.results()[0][0, 0] - ref).max() < 2e-3
+
+
+def test_label_rule_matches_the_direct_distance_bit_for_bit():
+    """marker_labels' running minimum gives the labels of norm(m - c).min() < 30 exactly."""
+    rng = np.random.default_rng(3)
+    markers = (rng.random((40, 127, 2)) * 600).astype(np.float32)
+    line = (rng.random((40, 50, 2)) * 600).astype(np.float32)
+    angle = rng.random((40, 60)) * 2 * np.pi  # 60 markers within 1e-4 px of the 30 px circle
+    radius = 30.0 + rng.normal(size=(40, 60)) * 1e-4
+    markers[:, :60] = line[:, :1] + np.stack([radius * np.cos(angle), radius * np.sin(angle)], -1)
+    contact = rng.random(40) > 0.2
+    d = np.linalg.norm(markers[:, :, None, :] - line[:, None, :, :], axis=-1).min(axis=2)
+    direct = ((d < 30.0) & contact[:, None]).astype(np.int8)
+    assert np.array_equal(marker_labels(markers, line, contact), direct) and direct.sum() > 0

@@ -101,3 +101,16 @@ def test_canonical_geometry_is_the_default():
 def test_bad_geometry_is_rejected(kwargs, match):
     with pytest.raises(ValueError, match=match):
         plan_trajectory(**kwargs)
+
+
+def test_lockstep_planning_equals_planning_alone():
+    """plan_trajectories (all envs' controllers on stacked rotations) = each env planned by itself."""
+    from palpation.twin.trajectory import plan_trajectories
+
+    specs = [("press", 0.0, None, None), ("twist_z", 0.0, 4.0, 90.0), ("twist_x", 0.0, None, None),
+             ("slide", 7.0, None, None), ("slide", -3.0, 2.0, None)]
+    tip = np.array([1e-5, -2e-5, 3e-6])
+    for spec, traj in zip(specs, plan_trajectories(specs, tip)):
+        alone = plan_trajectory(spec[0], spec[1], tip, depth_mm=spec[2], angle_deg=spec[3])
+        assert np.array_equal(traj.T_BA, alone.T_BA) and np.array_equal(traj.T_BA0, alone.T_BA0)
+        assert traj.record_from == alone.record_from and traj.kind == alone.kind

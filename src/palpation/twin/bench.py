@@ -20,16 +20,25 @@ PEAK_BANDWIDTH = {"H200": 4.8e12, "H100 PCIe": 2.0e12, "H100": 3.35e12, "A100": 
 VEC3, I32, F32, MAT33 = 12, 4, 4, 36
 
 
-def substep_bytes(n_nodes: int, n_tets: int, n_surface: int, n_envs: int) -> dict[str, int]:
-    """DRAM bytes of one substep, as streamed (every access) and compulsory (each array once)."""
-    tet_stream = 4 * I32 + MAT33 + 4 * 2 * VEC3 + 4 * 2 * VEC3  # idx, Dm^-1, x+v gathers, 4 atomics r+w
-    node_stream = (VEC3  # zero f
-                   + 2 * 2 * VEC3 + 3 * VEC3 + F32 + I32)  # integrate: x, v r+w; f, f_c, v_ctl; m; fixed
-    surf_stream = I32 + 3 * VEC3 + F32 + VEC3  # contact: index; x, v, f; 1/m; write f_c
+def substep_bytes(n_nodes: int, n_tets: int, n_surface: int, n_envs: int,
+                  gather: bool = False) -> dict[str, int]:
+    """DRAM bytes of one substep, as streamed (every access) and compulsory (each array once).
+
+    A substep is the elastic pass over `n_tets` (the tets that move) and one fused node pass
+    (contact, integration, control). Scatter: 4 float atomics (read + write) per tet into f, which
+    the node pass reads and clears. Gather: 4 contiguous stores per tet, which the node pass reads
+    once each through an index list.
+    """
+    sink = 4 * VEC3 + 4 * (VEC3 + I32) if gather else 4 * 2 * VEC3  # stores + indexed reads, or atomics
+    tet_stream = 4 * I32 + MAT33 + 4 * 2 * VEC3 + sink  # idx, Dm^-1, x+v gathers, corner forces
+    node_stream = (2 * 2 * VEC3 + VEC3 + F32 + 3 * I32  # x, v r+w; v_ctl; 1/m; fixed, surface, slots
+                   + (0 if gather else 2 * VEC3))  # scatter: f read and cleared
+    surf_stream = VEC3  # write f_c
     streamed = n_envs * (n_tets * tet_stream + n_nodes * node_stream + n_surface * surf_stream)
-    # compulsory: connectivity and Dm^-1 once (shared), every state array once per env
-    compulsory = n_tets * (4 * I32 + MAT33) + n_envs * n_nodes * (
-        2 * 2 * VEC3 + 2 * VEC3 + VEC3 + VEC3 + VEC3) + n_envs * n_surface * VEC3
+    # compulsory: connectivity and Dm^-1 once (shared); per env x, v read + written, v_ctl read,
+    # f_c written (the forces between the passes could stay on chip)
+    compulsory = n_tets * (4 * I32 + MAT33) + n_envs * (n_nodes * (2 * 2 * VEC3 + VEC3)
+                                                        + n_surface * VEC3)
     return {"streamed": int(streamed), "compulsory": int(compulsory)}
 
 
@@ -74,10 +83,11 @@ def time_substeps(mesh: SensorMesh, n_envs: int, n_substeps: int = 124, device: 
         wp.synchronize_device(sim.device)
         best = min(best, time.perf_counter() - t)
     per_substep = best / n_substeps
-    nbytes = substep_bytes(mesh.n_nodes, mesh.n_tets, len(mesh.surface_nodes), n_envs)
+    nbytes = substep_bytes(mesh.n_nodes, sim.n_force_tets, len(mesh.surface_nodes), n_envs, sim.gather)
     bw = device_bandwidth(sim.device)
     return {"device": str(sim.device), "device_name": sim.device.name, "resolution": mesh.resolution,
-            "n_envs": n_envs, "n_substeps": n_substeps, "substeps_per_s": 1.0 / per_substep,
+            "n_envs": n_envs, "n_substeps": n_substeps, "force_sum": "gather" if sim.gather else "scatter",
+            "substeps_per_s": 1.0 / per_substep,
             "env_substeps_per_s": n_envs / per_substep, "substep_s": per_substep,
             "bytes_streamed": nbytes["streamed"], "bytes_compulsory": nbytes["compulsory"],
             "bandwidth_bytes_per_s": bw, "roofline_substep_s": nbytes["streamed"] / bw,

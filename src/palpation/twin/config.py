@@ -45,12 +45,18 @@ class MaterialConfig:
     # "standard": mu, lambda from E, nu as the reference does (small-strain modulus then ~0.75 E
     # at nu=0.497, docs/twin.md); "smith": Smith et al. 2018 re-parametrisation, small-strain E exact.
     lame: str = "standard"
+    # layered skin (residual loop): tets within shell_thickness of the outer skin get the modulus
+    # E * shell_ratio. 0 m = one homogeneous material (the reference; the paper notes the real sensor
+    # has two, SPEC gives no values). Any thickness > 0 selects the layered elastic kernel.
+    shell_thickness: float = 0.0  # m
+    shell_ratio: float = 1.0  # E_shell / E_core; per env as "shell_ratio"
 
 
 @dataclass
 class DampingConfig:
     alpha: float = REF_ALPHA / REF_LENGTH_SCALE  # N s/m per tet edge pair (reference 0.1 at x5 scale)
     beta: float = 0.01  # fraction removed from the elastic force (SPEC §2.3)
+    per_env: bool = False  # alpha per env ("alpha" env parameter; selects the layered elastic kernel)
 
 
 @dataclass
@@ -59,6 +65,10 @@ class IntegratorConfig:
     substeps: int = 124  # per frame; frame = dt * substeps = 1.24 ms
     mass_scale: float = 25.0  # 25 = reference-equivalent; 1 = physical (needs dt <= stable_dt)
     zero_velocity_each_frame: bool = True  # reference quirk 10
+    # how tets' nodal forces are summed: "scatter" (float atomics), "gather" (each node sums its own
+    # slots: no atomics, deterministic on GPUs; SDF contact only), "auto" (gather on CUDA, scatter on
+    # the CPU, where both give the same bits). docs/twin.md compares them.
+    force_sum: str = "auto"
 
 
 @dataclass
@@ -86,6 +96,53 @@ class SceneConfig:
 
 
 @dataclass
+class CameraConfig:
+    """Image-space error of the real camera against the nominal fisheye (SPEC §5.1), residual loop.
+
+    The true projection is S(nominal projection) with S a similarity about the principal point:
+    u -> c + f_scale R(rotation) (u - c) + (dx, dy). Because the equidistant projection is linear in
+    f and c, this is exactly a camera with focal length f*f_scale, principal point c + (dx, dy) and
+    the image rotated about it. The markers stay bound to the rest template (the real rest photo
+    fixes where they are), so the error changes displacements, not the rest image.
+    """
+
+    f_scale: float = 1.0
+    rotation_deg: float = 0.0
+    dx_px: float = 0.0
+    dy_px: float = 0.0
+
+    @property
+    def is_identity(self) -> bool:
+        return (self.f_scale, self.rotation_deg, self.dx_px, self.dy_px) == (1.0, 0.0, 0.0, 0.0)
+
+
+@dataclass
+class MountConfig:
+    """Rigid offset of the real sensor from the commanded pose (body frame, about the tip)."""
+
+    dz: float = 0.0  # m along the sensor axis; > 0 = deeper into the phantom than commanded
+    tilt_x_deg: float = 0.0
+    tilt_y_deg: float = 0.0
+
+    @property
+    def is_identity(self) -> bool:
+        return (self.dz, self.tilt_x_deg, self.tilt_y_deg) == (0.0, 0.0, 0.0)
+
+
+@dataclass
+class MarkerConfig:
+    """Simulated markers (SPEC §5.2: an inverse-distance mean of 5 projected dome nodes, residual loop).
+
+    The inverse-distance mean does not reproduce the template it was bound to: at rest the bound
+    markers sit 6.5 px (coarse mesh) or 2.8 px (reference mesh) from the template on average.
+    `anchor` adds that fraction of the rest offset (template - bound rest) to every marker; 1 puts
+    the rest markers exactly where the real rest photo has them. 0 = the reference.
+    """
+
+    anchor: float = 0.0
+
+
+@dataclass
 class HealthConfig:
     max_abs_position: float = 2.0  # m (reference: |x| > 10 sim)
     check_every: int = 1  # frames between health checks (reference: 20 in calibration)
@@ -100,7 +157,15 @@ class TwinConfig:
     contact: ContactConfig = field(default_factory=ContactConfig)
     scene: SceneConfig = field(default_factory=SceneConfig)
     health: HealthConfig = field(default_factory=HealthConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    mount: MountConfig = field(default_factory=MountConfig)
+    markers: MarkerConfig = field(default_factory=MarkerConfig)
     device: str = "cpu"
+
+    @property
+    def layered(self) -> bool:
+        """Whether the layered elastic kernel (per-tet shell, per-env alpha) runs."""
+        return self.material.shell_thickness > 0 or self.damping.per_env
 
     @property
     def frame_dt(self) -> float:
@@ -115,6 +180,19 @@ class TwinConfig:
             raise ValueError(f"twin.material.lame={self.material.lame!r}: use 'standard' or 'smith'")
         if self.contact.rule not in ("sdf", "centroid"):
             raise ValueError(f"twin.contact.rule={self.contact.rule!r}: use 'sdf' or 'centroid'")
+        if self.health.check_every < 1:
+            raise ValueError(f"twin.health.check_every={self.health.check_every}: must be >= 1")
+        if self.integrator.force_sum not in ("auto", "scatter", "gather"):
+            raise ValueError(f"twin.integrator.force_sum={self.integrator.force_sum!r}: use 'auto', "
+                             "'scatter' or 'gather'")
+        if self.integrator.force_sum == "gather" and self.contact.rule == "centroid":
+            raise ValueError("twin.integrator.force_sum='gather' needs contact.rule='sdf' (the centroid "
+                             "rule reads the scattered forces); use 'scatter' or 'auto'")
+        if self.material.shell_thickness < 0 or self.material.shell_ratio <= 0:
+            raise ValueError(f"twin.material: need shell_thickness >= 0 and shell_ratio > 0, got "
+                             f"{self.material.shell_thickness}, {self.material.shell_ratio}")
+        if self.camera.f_scale <= 0:
+            raise ValueError(f"twin.camera.f_scale={self.camera.f_scale}: must be > 0")
         if self.integrator.mass_scale <= 0:
             raise ValueError(f"twin.integrator.mass_scale={self.integrator.mass_scale}: must be > 0")
         return self

@@ -68,6 +68,24 @@ def contact_force(d: float, n: wp.vec3, v: wp.vec3, k_n: float, c_n: float, k_t:
     return fn + ft
 
 
+@wp.func
+def surface_contact_force(xi: wp.vec3, vel: wp.vec3, env: int, p: ContactParams, vessel_sdf_on: int):
+    """Vessel (SDF) + phantom force on one surface node, and 1 if it touches the vessel."""
+    fc = wp.vec3(0.0)
+    touched = int(0)
+    if p.vessel[env] != 0 and vessel_sdf_on != 0:
+        d, n = vessel_sdf(xi, p.vessel_center, p.vessel_half_length, p.vessel_radius)
+        if d < 0.0:
+            fc += contact_force(d, n, vel, p.k_n[env], p.c_n[env], p.k_t[env], p.mu[env], p.slip_eps)
+            touched = 1
+    if p.phantom_on != 0:
+        d = xi[2] - p.phantom_top_z
+        if d < 0.0:
+            fc += contact_force(d, wp.vec3(0.0, 0.0, 1.0), vel, p.k_s[env], p.c_s[env], p.k_t[env],
+                                p.mu[env], p.slip_eps)
+    return fc, touched
+
+
 @wp.kernel
 def eval_contact_forces(
     x: wp.array[wp.vec3],
@@ -89,19 +107,18 @@ def eval_contact_forces(
     i = env * n_nodes + node
     # SPEC §2.4: contact sees the velocity already updated by this substep's elastic force
     vel = v[i] + dt * inv_mass[node] * f[i]
-    xi = x[i]
-    fc = wp.vec3(0.0)
-    if p.vessel[env] != 0 and vessel_sdf_on != 0:
-        d, n = vessel_sdf(xi, p.vessel_center, p.vessel_half_length, p.vessel_radius)
-        if d < 0.0:
-            fc += contact_force(d, n, vel, p.k_n[env], p.c_n[env], p.k_t[env], p.mu[env], p.slip_eps)
-            contact_flag[env] = 1
-    if p.phantom_on != 0:
-        d = xi[2] - p.phantom_top_z
-        if d < 0.0:
-            fc += contact_force(d, wp.vec3(0.0, 0.0, 1.0), vel, p.k_s[env], p.c_s[env], p.k_t[env],
-                                p.mu[env], p.slip_eps)
+    fc, touched = surface_contact_force(x[i], vel, env, p, vessel_sdf_on)
+    if touched != 0:
+        contact_flag[env] = 1
     f_c[i] = fc
+
+
+@wp.kernel
+def record_contact_flags(contact_flag: wp.array[wp.int32], frame_index: wp.array[wp.int32], row_offset: int,
+                         history: wp.array2d[wp.int32]):
+    """history[frame_index + row_offset, env] = this frame's vessel-contact flag (one graph, every frame)."""
+    env = wp.tid()
+    history[frame_index[0] + row_offset, env] = contact_flag[env]
 
 
 @wp.kernel

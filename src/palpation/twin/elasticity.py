@@ -24,6 +24,25 @@ def neo_hookean_stress(F: wp.mat33, mu: float, lam: float):
     return mu * (1.0 - 1.0 / (ic + 1.0)) * F + lam * (wp.determinant(F) - alpha) * dJdF
 
 
+@wp.func
+def deposit_forces(f: wp.array[wp.vec3], fs: wp.array[wp.vec3], t: int, slot_off: int, i0: int, i1: int,
+                   i2: int, i3: int, g0: wp.vec3, g1: wp.vec3, g2: wp.vec3, gather: int):
+    """A tet's corner forces (the 4th is -(g0 + g1 + g2)): atomic adds into f ("scatter"), or 4
+    contiguous plain stores at fs[slot_off + 4 t] that the node pass sums in a fixed order ("gather":
+    no float atomics, so GPU runs are deterministic; on the CPU both give the same sums bit for bit)."""
+    if gather != 0:
+        b = slot_off + 4 * t  # a warp writes 32 x 48 contiguous bytes: no partial sectors
+        fs[b] = g0
+        fs[b + 1] = g1
+        fs[b + 2] = g2
+        fs[b + 3] = -(g0 + g1 + g2)
+    else:
+        wp.atomic_add(f, i0, g0)
+        wp.atomic_add(f, i1, g1)
+        wp.atomic_add(f, i2, g2)
+        wp.atomic_add(f, i3, -(g0 + g1 + g2))
+
+
 @wp.kernel
 def eval_elastic_forces(
     x: wp.array[wp.vec3],
@@ -36,7 +55,10 @@ def eval_elastic_forces(
     n_nodes: int,
     alpha: float,
     beta: float,
+    n_slots: int,
+    gather: int,
     f: wp.array[wp.vec3],
+    fs: wp.array[wp.vec3],
 ):
     tid = wp.tid()
     env = tid // n_tets
@@ -57,10 +79,68 @@ def eval_elastic_forces(
     g0 = (1.0 - beta) * wp.vec3(H[0, 0], H[1, 0], H[2, 0]) - alpha * (v[i0] - v3)
     g1 = (1.0 - beta) * wp.vec3(H[0, 1], H[1, 1], H[2, 1]) - alpha * (v[i1] - v3)
     g2 = (1.0 - beta) * wp.vec3(H[0, 2], H[1, 2], H[2, 2]) - alpha * (v[i2] - v3)
-    wp.atomic_add(f, i0, g0)
-    wp.atomic_add(f, i1, g1)
-    wp.atomic_add(f, i2, g2)
-    wp.atomic_add(f, i3, -(g0 + g1 + g2))
+    deposit_forces(f, fs, t, env * n_slots, i0, i1, i2, i3, g0, g1, g2, gather)
+
+
+@wp.kernel
+def eval_elastic_forces_layered(
+    x: wp.array[wp.vec3],
+    v: wp.array[wp.vec3],
+    tets: wp.array2d[wp.int32],
+    dm_inv: wp.array[wp.mat33],
+    env_mu: wp.array[float],
+    env_lam: wp.array[float],
+    tet_shell: wp.array[float],
+    env_shell_ratio: wp.array[float],
+    env_alpha: wp.array[float],
+    n_tets: int,
+    n_nodes: int,
+    beta: float,
+    n_slots: int,
+    gather: int,
+    f: wp.array[wp.vec3],
+    fs: wp.array[wp.vec3],
+):
+    """`eval_elastic_forces` with a stiffer outer shell and a per-env damping alpha (residual loop).
+
+    A tet's moduli are scaled by 1 + (ratio - 1) * shell fraction (mu and lambda alike, so nu is
+    kept). At ratio 1 and alpha equal to the config's, the result equals the reference kernel's bit
+    for bit (the scale is exactly 1.0).
+    """
+    tid = wp.tid()
+    env = tid // n_tets
+    t = tid - env * n_tets
+    off = env * n_nodes
+    i0 = tets[t, 0] + off
+    i1 = tets[t, 1] + off
+    i2 = tets[t, 2] + off
+    i3 = tets[t, 3] + off
+    x3 = x[i3]
+    ds = wp.matrix_from_cols(x[i0] - x3, x[i1] - x3, x[i2] - x3)
+    B = dm_inv[t]
+    scale = 1.0 + (env_shell_ratio[env] - 1.0) * tet_shell[t]
+    P = neo_hookean_stress(ds @ B, scale * env_mu[env], scale * env_lam[env])
+    vol = wp.abs(wp.determinant(ds)) / 6.0
+    H = -vol * (P @ wp.transpose(B))
+    alpha = env_alpha[env]
+    v3 = v[i3]
+    g0 = (1.0 - beta) * wp.vec3(H[0, 0], H[1, 0], H[2, 0]) - alpha * (v[i0] - v3)
+    g1 = (1.0 - beta) * wp.vec3(H[0, 1], H[1, 1], H[2, 1]) - alpha * (v[i1] - v3)
+    g2 = (1.0 - beta) * wp.vec3(H[0, 2], H[1, 2], H[2, 2]) - alpha * (v[i2] - v3)
+    deposit_forces(f, fs, t, env * n_slots, i0, i1, i2, i3, g0, g1, g2, gather)
+
+
+def force_slots(tets: np.ndarray, needs_force: np.ndarray, n_nodes: int,
+                run_index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Gather lists: for each node that needs its force, the fs slots (4 run_index[t] + corner) of
+    its (tet, corner) pairs in mesh order, the order a CPU scatter adds them, so both sums match
+    bit for bit whatever order the tets run in. Returns the slots and per node [start[i], start[i+1])."""
+    node = tets.reshape(-1)
+    slot = (4 * np.repeat(np.asarray(run_index), 4) + np.tile(np.arange(4), len(tets))).astype(np.int32)
+    idx = np.flatnonzero(needs_force[node])
+    order = idx[np.argsort(node[idx], kind="stable")]  # by node, then (tet, corner) in mesh order
+    start = np.concatenate([[0], np.cumsum(np.bincount(node[idx], minlength=n_nodes))]).astype(np.int32)
+    return slot[order], start
 
 
 def lame_parameters(E, nu, mode: str = "standard") -> tuple[np.ndarray, np.ndarray]:
@@ -142,10 +222,11 @@ def elastic_forces(nodes: np.ndarray, tets: np.ndarray, x: np.ndarray, v: np.nda
     dm_inv, _ = rest_shape(nodes, tets)
     v = np.zeros_like(x) if v is None else v
     f = wp.zeros(len(x), dtype=wp.vec3, device=device)
+    no_fs = wp.zeros(1, dtype=wp.vec3, device=device)
     wp.launch(eval_elastic_forces, dim=len(tets), device=device,
               inputs=[wp.array(x, dtype=wp.vec3, device=device), wp.array(v, dtype=wp.vec3, device=device),
                       wp.array(tets, dtype=wp.int32, device=device),
                       wp.array(dm_inv, dtype=wp.mat33, device=device),
                       wp.array([mu], dtype=float, device=device), wp.array([lam], dtype=float, device=device),
-                      len(tets), len(x), alpha, beta], outputs=[f])
+                      len(tets), len(x), alpha, beta, 0, 0], outputs=[f, no_fs])
     return f.numpy().astype(np.float64)

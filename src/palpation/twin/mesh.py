@@ -146,6 +146,31 @@ def classify_nodes_mm(nodes_mm: np.ndarray, tets: np.ndarray) -> dict[str, np.nd
             "dome_nodes": dome.astype(np.int32), "fixed": fixed}
 
 
+def skin_depth_m(points_B: np.ndarray) -> np.ndarray:
+    """Depth (m) of body-frame points below the outer skin: the dome cap and the wall above the flange.
+
+    Analytic (SPEC §2.1), so it does not depend on the mesh resolution; inf at or below the flange top.
+    """
+    p = np.asarray(points_B, np.float64) * 1e3
+    p = p + np.array([0.0, 0.0, DOME_ROC_MM])  # back to the gmsh frame (sphere at the origin)
+    depth = np.minimum(DOME_ROC_MM - np.linalg.norm(p, axis=-1), WALL_R_MM - np.hypot(p[..., 0], p[..., 1]))
+    return np.where(p[..., 2] > FLANGE_TOP_MM, np.maximum(depth, 0.0) * 1e-3, np.inf)
+
+
+def shell_weights(nodes: np.ndarray, tets: np.ndarray, thickness_m: float) -> np.ndarray:
+    """(T,) fraction of each tet's volume within `thickness_m` of the outer skin (layered skin).
+
+    Estimated on the 35 points of a degree-4 barycentric lattice, so a shell thinner than the tets of
+    a coarse mesh still stiffens the outer tets in proportion instead of all or nothing.
+    """
+    if thickness_m <= 0:
+        return np.zeros(len(tets))
+    lattice = np.array([(i, j, k, 4 - i - j - k) for i in range(5) for j in range(5 - i)
+                        for k in range(5 - i - j)], np.float64) / 4.0
+    pts = np.einsum("sk,tkc->tsc", lattice, np.asarray(nodes, np.float64)[tets])
+    return (skin_depth_m(pts) < thickness_m).mean(axis=1)
+
+
 def build_sensor_mesh(resolution: str = "coarse", length_factor: float | None = None) -> SensorMesh:
     """Mesh the sensor; `length_factor` overrides the factor of a named resolution."""
     if length_factor is None:

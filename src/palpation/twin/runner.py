@@ -189,6 +189,10 @@ def run_batch(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest],
     if through is not None:  # the projector ran the nominal camera: map into the true image
         markers = through.markers(markers).astype(np.float32)
         centre = image.apply(centre).astype(np.float32)
+    if cfg.markers.anchor != 0.0:  # move the bound rest onto the template (twin.config.MarkerConfig)
+        shift = cfg.markers.anchor * (binding.template_px - binding.rest_px)
+        markers = (markers + shift).astype(np.float32)
+        binding = replace(binding, rest_px=binding.rest_px + shift)
     contact = contact_dev.numpy().astype(bool)
     wall = time.perf_counter() - start
 

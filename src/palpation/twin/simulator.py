@@ -1,8 +1,10 @@
 """N independent sensor twins advanced by the same kernel launches (the Warp `Example` shape).
 
 `__init__` allocates every array; `simulate()` runs one frame (begin-of-frame kernels and the
-substeps) without allocating, so on CUDA it is captured once as a graph and `step_frame` replays
-it. One small host-to-device copy of the poses per frame; no host sync inside a frame.
+substeps) without allocating, so it is captured once as a graph (CUDA, and the CPU since Warp 1.19)
+and `step_frame` replays it with one small host-to-device copy of the poses per frame. With a whole
+schedule uploaded (`set_schedule`), `step_scheduled` replays one graph per frame and the host sends
+nothing: the frame index lives on the device.
 """
 
 from __future__ import annotations
@@ -14,16 +16,19 @@ import warp as wp
 
 from palpation.twin.config import TwinConfig
 from palpation.twin.contact import ContactParams, eval_centroid_contact, eval_contact_forces
-from palpation.twin.elasticity import (courant_dt, eval_elastic_forces, lame_parameters, lumped_mass,
-                                       rest_shape)
-from palpation.twin.integrate import (check_nodes, check_tets, integrate_nodes, reset_velocities,
+from palpation.twin.elasticity import (courant_dt, eval_elastic_forces, eval_elastic_forces_layered,
+                                       force_slots, lame_parameters, lumped_mass, rest_shape)
+from palpation.twin.integrate import (advance_frame, check_nodes, check_tets, integrate_contact_nodes,
+                                      integrate_nodes, load_frame_poses, reset_velocities,
                                       set_control_velocity, snap_fixed_nodes)
-from palpation.twin.mesh import SensorMesh, build_vessel_points
+from palpation.twin.mesh import SensorMesh, build_vessel_points, shell_weights
 
 log = logging.getLogger(__name__)
 
 # per-env parameters a caller may set; the rest of the physics is shared by all envs
 ENV_PARAM_KEYS = ("E", "nu", "k_n", "c_n", "k_t", "mu", "k_s", "c_s", "vessel")
+# per env only with the layered kernel (cfg.layered: material.shell_thickness > 0 or damping.per_env)
+EXTRA_ENV_KEYS = ("alpha", "shell_ratio")
 
 
 def resolve_device(name: str):
@@ -32,6 +37,17 @@ def resolve_device(name: str):
         log.warning("device %r requested but CUDA is not available: running on the CPU", name)
         name = "cpu"
     return wp.get_device(name)
+
+
+def morton_order(points: np.ndarray, bits: int = 10) -> np.ndarray:
+    """Indices that sort 3-D points along a Morton (Z-order) curve of their bounding box."""
+    span = max(float((points.max(axis=0) - points.min(axis=0)).max()), 1e-30)
+    q = ((points - points.min(axis=0)) / span * (2**bits - 1)).astype(np.int64)
+    code = np.zeros(len(points), np.int64)
+    for b in range(bits):
+        for d in range(3):
+            code |= ((q[:, d] >> b) & 1) << (3 * b + d)
+    return np.argsort(code, kind="stable")
 
 
 class BatchedTwin:
@@ -46,14 +62,41 @@ class BatchedTwin:
         self.frame_dt = self.dt * self.substeps
         n, N, dev = self.n_envs, self.n_nodes, self.device
 
-        dm_inv, _ = rest_shape(mesh.nodes, mesh.tets)
+        # Tets with a free or contact node first, in mesh order; the force kernels run over those
+        # only. A tet of driven interior nodes alone (15 % of the reference mesh) only pushes nodes
+        # whose velocity the control overwrites, so skipping it changes nothing, not even the order
+        # of the sums at any other node. The health check sees all tets.
+        on_surface = np.isin(np.arange(N), mesh.surface_nodes)
+        needs_force = ~mesh.fixed | on_surface
+        moving = needs_force[mesh.tets].any(axis=1)
+        moving_ix = np.flatnonzero(moving)
+        mode = cfg.integrator.force_sum
+        self.gather = mode == "gather" or (mode == "auto" and dev.is_cuda and cfg.contact.rule == "sdf")
+        run_index = np.arange(len(moving_ix))  # where each moving tet (mesh order) runs
+        if dev.is_cuda or self.gather:  # run them along a space-filling curve: a warp's tets share
+            # nodes, so the x, v gathers hit L1 (3x fewer sectors than mesh order on the reference
+            # mesh). Gather sums keep the mesh order, so the results do not change (a CPU scatter,
+            # whose sums follow the tet order, keeps the mesh order).
+            perm = morton_order(mesh.nodes[mesh.tets[moving_ix]].mean(axis=1))
+            run_index[perm] = np.arange(len(perm))
+        slots, start = force_slots(mesh.tets[moving_ix], needs_force, N, run_index)  # sums in mesh order
+        moving_ix = moving_ix[np.argsort(run_index)]
+        self.tet_order = np.concatenate([moving_ix, np.flatnonzero(~moving)])
+        self.n_force_tets = len(moving_ix)
+        tets = mesh.tets[self.tet_order]
+        dm_inv, _ = rest_shape(mesh.nodes, tets)
         mass = lumped_mass(mesh.nodes, mesh.tets, cfg.material.rho, cfg.integrator.mass_scale)
         self.rest_body = wp.array(mesh.nodes, dtype=wp.vec3, device=dev)
-        self.tets = wp.array(mesh.tets, dtype=wp.int32, device=dev)
+        self.tets = wp.array(tets, dtype=wp.int32, device=dev)
         self.dm_inv = wp.array(dm_inv, dtype=wp.mat33, device=dev)
         self.inv_mass = wp.array(1.0 / mass, dtype=float, device=dev)
         self.fixed = wp.array(mesh.fixed.astype(np.int32), dtype=wp.int32, device=dev)
         self.surface = wp.array(mesh.surface_nodes, dtype=wp.int32, device=dev)
+        self.on_surface = wp.array(on_surface, dtype=wp.int32, device=dev)
+        self.n_slots = 4 * self.n_force_tets if self.gather else 0  # per env: 4 corners per tet
+        self.node_slots = wp.array(slots if self.gather else np.zeros(1), dtype=wp.int32, device=dev)
+        self.slot_start = wp.array(start, dtype=wp.int32, device=dev)
+        self.fs = wp.zeros(max(n * self.n_slots, 1), dtype=wp.vec3, device=dev)  # corner forces, gather
 
         # state, flat over envs: env e owns [e*N, (e+1)*N)
         self.x, self.v, self.f, self.f_c, self.v_ctl, self.x_u = (
@@ -62,6 +105,7 @@ class BatchedTwin:
         self.contact_flag, self.failed_flag = (wp.zeros(n, dtype=wp.int32, device=dev) for _ in range(2))
         self.pose_R, self.delta_R = (wp.zeros(n, dtype=wp.mat33, device=dev) for _ in range(2))
         self.pose_t, self.delta_t = (wp.zeros(n, dtype=wp.vec3, device=dev) for _ in range(2))
+        self.frame_index = wp.zeros(1, dtype=wp.int32, device=dev)  # frames since reset, on the device
 
         c, s = cfg.contact, cfg.scene
         self.contact = ContactParams()
@@ -84,11 +128,16 @@ class BatchedTwin:
             self.contact_tris = wp.array(mesh.contact_tris, dtype=wp.int32, device=dev)
             # no sensor triangle lies farther from the tip than the rest radius plus 5 mm of travel
             self.reach = float(np.linalg.norm(mesh.nodes, axis=1).max()) + 0.005
+        if cfg.layered:  # shell fraction per tet, stored once like Dm^-1
+            w = shell_weights(mesh.nodes, mesh.tets, cfg.material.shell_thickness)[self.tet_order]
+            self.tet_shell = wp.array(w.astype(np.float32), dtype=float, device=dev)
+            self.env_alpha, self.env_shell_ratio = (wp.zeros(n, dtype=float, device=dev) for _ in range(2))
         self.set_env_params(env_params or {})
         self._pose = np.tile(np.eye(4), (n, 1, 1))
         self.frame = 0
-        self.use_graph = self.device.is_cuda
+        self.use_graph = True  # CUDA graphs; CPU graphs replay natively (Warp >= 1.19), 0.2 us a launch
         self.graph = None
+        self._schedule = self._sched_graph = None
         limit = courant_dt(mesh.nodes, mesh.tets, cfg.material.E, cfg.material.nu, cfg.material.rho,
                            cfg.integrator.mass_scale, cfg.material.lame)
         if self.dt > 1.5 * limit:  # measured limits are 1.25-1.5x this estimate (docs/twin.md)
@@ -97,10 +146,14 @@ class BatchedTwin:
 
     # ---- parameters and state -------------------------------------------------------------
     def set_env_params(self, params: dict[str, np.ndarray]) -> None:
-        """Per-env E, nu, k_n, c_n, k_t, mu, k_s, c_s, vessel (scalars broadcast); others from cfg."""
-        unknown = set(params) - set(ENV_PARAM_KEYS)
+        """Per-env E, nu, k_n, c_n, k_t, mu, k_s, c_s, vessel (scalars broadcast); others from cfg.
+
+        With the layered kernel (cfg.layered) also alpha and shell_ratio (EXTRA_ENV_KEYS)."""
+        keys = ENV_PARAM_KEYS + EXTRA_ENV_KEYS
+        unknown = set(params) - set(keys)
         if unknown:
-            raise ValueError(f"unknown env parameter(s) {sorted(unknown)}: use {ENV_PARAM_KEYS}")
+            raise ValueError(f"unknown env parameter(s) {sorted(unknown)}: use {keys}")
+        extras = self._extra_params(params)
         c, m = self.cfg.contact, self.cfg.material
         defaults = {"E": m.E, "nu": m.nu, "k_n": c.k_n, "c_n": c.c_n, "k_t": c.k_t, "mu": c.mu,
                     "k_s": c.k_s, "c_s": c.c_s, "vessel": float(c.vessel)}
@@ -123,7 +176,28 @@ class BatchedTwin:
         for key in ("k_n", "c_n", "k_t", "mu", "k_s", "c_s"):
             getattr(self.contact, key).assign(vals[key].astype(np.float32))
         self.contact.vessel.assign((vals["vessel"] != 0).astype(np.int32))
+        if self.cfg.layered:
+            self.env_alpha.assign(extras["alpha"].astype(np.float32))
+            self.env_shell_ratio.assign(extras["shell_ratio"].astype(np.float32))
+            vals.update(extras)
         self.env_params = vals
+
+    def _extra_params(self, params: dict) -> dict[str, np.ndarray]:
+        """alpha and shell_ratio per env; without the layered kernel only the config's values are allowed."""
+        defaults = {"alpha": self.cfg.damping.alpha, "shell_ratio": self.cfg.material.shell_ratio}
+        out = {}
+        for key, default in defaults.items():
+            a = np.asarray(params.get(key, default), np.float64).reshape(-1)
+            if a.size not in (1, self.n_envs) or not np.all(np.isfinite(a)) or np.any(a < 0):
+                raise ValueError(f"env parameter {key}: need one finite value >= 0 or {self.n_envs} "
+                                 f"of them, got {a}")
+            if not self.cfg.layered and np.any(a != default):
+                raise ValueError(f"env parameter {key} differs from the config, which needs the layered "
+                                 "kernel: set twin.damping.per_env=true or twin.material.shell_thickness > 0")
+            out[key] = np.broadcast_to(a, (self.n_envs,))
+        if np.any(out["shell_ratio"] <= 0):
+            raise ValueError(f"env parameter shell_ratio must be > 0, got {out['shell_ratio']}")
+        return out
 
     def reset(self, T_BA: np.ndarray) -> None:
         """Pose every env rigidly (undeformed, at rest); clears contact and failure flags."""
@@ -132,9 +206,11 @@ class BatchedTwin:
         posed = np.einsum("eij,nj->eni", T[:, :3, :3], X) + T[:, None, :3, 3]
         self.x.assign(posed.reshape(-1, 3).astype(np.float32))
         self.x_u.assign(posed.reshape(-1, 3).astype(np.float32))
-        for a in (self.v, self.f, self.f_c, self.v_ctl, self.contact_flag, self.failed_flag):
+        for a in (self.v, self.f, self.f_c, self.v_ctl, self.contact_flag, self.failed_flag,
+                  self.frame_index):
             a.zero_()
         self._pose, self.frame = T, 0
+        self._schedule = self._sched_graph = None  # a schedule starts from the pose it was set at
 
     def step_frame(self, T_BA_next: np.ndarray) -> None:
         """Advance one frame while the fixed nodes move rigidly from the current to the next pose."""
@@ -147,15 +223,70 @@ class BatchedTwin:
         if self.use_graph:
             if self.graph is None:
                 with wp.ScopedCapture(device=self.device) as capture:
-                    self.simulate()
+                    self._frame()
                 self.graph = capture.graph
             wp.capture_launch(self.graph)
         else:
-            self.simulate()
+            self._frame()
         self._pose = T_next
         self.frame += 1
-        if self.frame % self.cfg.health.check_every == 0:
-            self.check_health()
+        self._schedule = self._sched_graph = None  # the schedule's increments start elsewhere now
+
+    def set_schedule(self, T_BA: np.ndarray, extra=None) -> None:
+        """Upload a whole pose schedule (F, n, 4, 4) for `step_scheduled`.
+
+        Frame f moves the fixed nodes from pose f - 1 (the current pose for f = 0) to pose f. The
+        increments are computed here once, in float64, as `step_frame` computes them per frame, so
+        both give bit-identical results. `extra(frame_index, offset)` may launch more kernels after
+        the physics of each frame (marker extraction, flag records); they are captured into the
+        same graph and must read the schedule row being run as frame_index[0] + offset.
+        """
+        T = np.asarray(T_BA, dtype=np.float64)
+        if T.ndim != 4 or T.shape[1:] != (self.n_envs, 4, 4) or len(T) == 0 or not np.all(np.isfinite(T)):
+            raise ValueError(f"schedule must be finite with shape (frames, {self.n_envs}, 4, 4), "
+                             f"got {T.shape}")
+        prev = np.concatenate([self._pose[None], T[:-1]])
+        delta = T @ np.linalg.inv(prev)  # world-frame increments, float64
+        F, n, dev = len(T), self.n_envs, self.device
+        self._sched_arrays = [
+            wp.array(prev[..., :3, :3].astype(np.float32), dtype=wp.mat33, device=dev),
+            wp.array(prev[..., :3, 3].astype(np.float32), dtype=wp.vec3, device=dev),
+            wp.array((delta[..., :3, :3] - np.eye(3)).astype(np.float32), dtype=wp.mat33, device=dev),
+            wp.array(delta[..., :3, 3].astype(np.float32), dtype=wp.vec3, device=dev)]
+        assert all(a.shape == (F, n) for a in self._sched_arrays)
+        self._schedule, self._sched_start, self._sched_next = T, self.frame, 0
+        self._sched_extra, self._sched_graph = extra, None
+
+    def step_scheduled(self) -> None:
+        """Advance one frame of the uploaded schedule: one graph launch, no host-device traffic."""
+        if self._schedule is None or self._sched_next >= len(self._schedule):
+            raise ValueError("step_scheduled needs a schedule with frames left: call set_schedule after "
+                             "reset (step_frame and reset discard it)")
+        if self.use_graph:
+            if self._sched_graph is None:
+                with wp.ScopedCapture(device=self.device) as capture:
+                    self._frame(scheduled=True)
+                self._sched_graph = capture.graph
+            wp.capture_launch(self._sched_graph)
+        else:
+            self._frame(scheduled=True)
+        self._pose = self._schedule[self._sched_next]
+        self._sched_next += 1
+        self.frame += 1
+
+    def _frame(self, scheduled: bool = False) -> None:
+        """One frame as captured: [schedule row ->] poses, physics, [extra,] frame_index += 1, health."""
+        n, N, dev = self.n_envs, self.n_nodes, self.device
+        offset = -self._sched_start if scheduled else 0
+        if scheduled:
+            wp.launch(load_frame_poses, dim=n, device=dev,
+                      inputs=[*self._sched_arrays, self.frame_index, offset],
+                      outputs=[self.pose_R, self.pose_t, self.delta_R, self.delta_t])
+        self.simulate()
+        if scheduled and self._sched_extra is not None:
+            self._sched_extra(self.frame_index, offset)
+        wp.launch(advance_frame, dim=1, device=dev, inputs=[self.frame_index])
+        self._launch_health(self.cfg.health.check_every)
 
     def simulate(self) -> None:
         """One frame: control velocities, velocity reset, substeps, fixed nodes onto the pose.
@@ -175,10 +306,26 @@ class BatchedTwin:
 
     def substep(self) -> None:
         n, N, dev, d = self.n_envs, self.n_nodes, self.device, self.cfg.damping
-        self.f.zero_()
-        wp.launch(eval_elastic_forces, dim=n * self.n_tets, device=dev,
-                  inputs=[self.x, self.v, self.tets, self.dm_inv, self.env_mu, self.env_lam,
-                          self.n_tets, N, d.alpha, d.beta], outputs=[self.f])
+        T = self.n_force_tets  # the tets that move come first in self.tets (see __init__)
+        if self.centroid_rule:  # else the node pass below leaves f zeroed
+            self.f.zero_()
+        sink = [self.n_slots, int(self.gather)]  # scatter into f, or stores into fs for the gather
+        if self.cfg.layered:
+            wp.launch(eval_elastic_forces_layered, dim=n * T, device=dev,
+                      inputs=[self.x, self.v, self.tets, self.dm_inv, self.env_mu, self.env_lam,
+                              self.tet_shell, self.env_shell_ratio, self.env_alpha, T, N, d.beta, *sink],
+                      outputs=[self.f, self.fs])
+        else:
+            wp.launch(eval_elastic_forces, dim=n * T, device=dev,
+                      inputs=[self.x, self.v, self.tets, self.dm_inv, self.env_mu, self.env_lam,
+                              T, N, d.alpha, d.beta, *sink], outputs=[self.f, self.fs])
+        if not self.centroid_rule:  # SDF contact, integration and clearing f: one pass over the nodes
+            wp.launch(integrate_contact_nodes, dim=n * N, device=dev,
+                      inputs=[self.f, self.v_ctl, self.inv_mass, self.fixed, self.on_surface, N, self.dt,
+                              self.contact, int(self.gather), self.slot_start, self.node_slots, self.fs,
+                              self.n_slots],
+                      outputs=[self.x, self.v, self.f_c, self.contact_flag])
+            return
         if self.n_surface:  # writes every surface node's f_c: per-node vessel SDF and phantom
             wp.launch(eval_contact_forces, dim=n * self.n_surface, device=dev,
                       inputs=[self.x, self.v, self.f, self.inv_mass, self.surface, self.n_surface, N,
@@ -197,11 +344,17 @@ class BatchedTwin:
 
     def check_health(self) -> None:
         """Flag envs with a non-finite or runaway node, or an inverted tet (SPEC §2.4)."""
+        self._launch_health(1)
+
+    def _launch_health(self, every: int) -> None:
+        """The health check, run on the device when frame_index % every == 0."""
         n, N, dev = self.n_envs, self.n_nodes, self.device
         wp.launch(check_nodes, dim=n * N, device=dev,
-                  inputs=[self.x, N, self.cfg.health.max_abs_position], outputs=[self.failed_flag])
+                  inputs=[self.x, N, self.cfg.health.max_abs_position, self.frame_index, every],
+                  outputs=[self.failed_flag])
         wp.launch(check_tets, dim=n * self.n_tets, device=dev,
-                  inputs=[self.x, self.tets, self.dm_inv, self.n_tets, N], outputs=[self.failed_flag])
+                  inputs=[self.x, self.tets, self.dm_inv, self.n_tets, N, self.frame_index, every],
+                  outputs=[self.failed_flag])
 
     # ---- readers (each one device-to-host copy) -------------------------------------------
     def positions_world(self) -> np.ndarray:
