@@ -6,7 +6,7 @@ set -uo pipefail
 out=$1; shift
 export PYTHONPATH="$PWD/src${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 start=$(date +%s)
-python3 -m snakemake --workflow-profile workflow/profiles/paper --cores 16 --keep-going "$@" \
+timeout -s INT "${SNAKE_TIMEOUT:-0}" python3 -m snakemake --workflow-profile workflow/profiles/paper --cores 16 --keep-going "$@" \
   > "$out/snakemake.log" 2>&1
 rc=$?
 echo "snakemake rc=$rc after $(( $(date +%s) - start )) s"
