@@ -103,3 +103,15 @@ def test_app_same_seed_is_bit_identical(tmp_path, mesh):
     reqs = trajectory_set("randomised", 42, n_pairs=2)  # SPEC §7 check values
     assert [round(r.heading_offset_deg, 2) for r in reqs] == [8.22, 5.92, 7.83, -1.49]
     assert [round(r.k_n * 5) for r in reqs[:2]] == [24750, 9238] and round(reqs[0].c_n, 1) == 85.9
+
+
+def test_k_n_range_recentres_on_the_fit():
+    from palpation.apps.simulate import K_N_REF_RANGE, k_n_draw_range, trajectory_set
+
+    assert k_n_draw_range() == K_N_REF_RANGE
+    lo, hi = k_n_draw_range(94908.307)
+    assert np.isclose(np.sqrt(lo * hi), 94908.307) and np.isclose(hi / lo, 10.0)
+    reqs = trajectory_set("randomised", 42, n_pairs=3, k_n_ref_range=(lo, hi))
+    assert all(lo / 5 <= r.k_n <= hi / 5 for r in reqs)  # twin k_n = reference / 5
+    with pytest.raises(ValueError, match="recentre_k_n"):
+        k_n_draw_range(0.0)

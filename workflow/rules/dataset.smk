@@ -15,11 +15,13 @@ rule simulate_dataset:
         twin=TWIN_ARGS,
         n_pairs=DATASET.get("n_pairs", 250),
         seed=DATASET.get("seed", 42),
+        recentre=str(DATASET.get("recentre_k_n", False)).lower(),
     resources:
         gpu=GPU,
     log:
         "results/logs/sim/simulate_dataset.log",
     shell:
         "{PY} palpation.apps.simulate set=randomised n_pairs={params.n_pairs} seed={params.seed}"
+        " recentre_k_n={params.recentre}"
         " {params.twin} {TWIN_FIT_ARGS} mesh={input.mesh} out.dir={params.outdir} progress=false"
         " {params.hydra} > {log} 2>&1"
