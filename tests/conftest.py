@@ -9,3 +9,24 @@ def results_tmp(tmp_path, monkeypatch):
     monkeypatch.setenv("PALPATION_RESULTS", str(tmp_path))
     monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
     return tmp_path
+
+
+@pytest.fixture(scope="session")
+def real_sets(tmp_path_factory):
+    """Paths of the real Silicone and Meat sets: the workflow's if built, else built here (~30 s)."""
+    import subprocess
+    import sys
+
+    from palpation.paths import REPO_ROOT
+
+    built = {"silicone": REPO_ROOT / "results/data/silicone/silicone.npz",
+             "meat": REPO_ROOT / "results/data/meat/meat.npz"}
+    if all(p.exists() for p in built.values()):
+        return built
+    out = tmp_path_factory.mktemp("real_sets")
+    paths = {name: out / name / f"{name}.npz" for name in built}
+    for name, path in paths.items():
+        subprocess.run([sys.executable, "-m", f"palpation.apps.{name}", f"out.dir={path.parent}",
+                        "track=false", f"hydra.run.dir={path.parent}"], cwd=REPO_ROOT, check=True,
+                       capture_output=True, timeout=600)
+    return paths

@@ -24,12 +24,8 @@ def test_loaders_read_the_described_formats(paths):
     assert meat["train"].labels[0].dtype == np.int8 and meat["test"].window == "centred"
 
 
-SILICONE = REPO_ROOT / "results/data/silicone/silicone.npz"
-MEAT = REPO_ROOT / "results/data/meat/meat.npz"
-
-
-@pytest.mark.skipif(not (SILICONE.exists() and MEAT.exists()), reason="real data not built (silicone/meat rules)")
-def test_real_sets_give_the_papers_node_counts():
+def test_real_sets_give_the_papers_node_counts(real_sets):
+    SILICONE, MEAT = real_sets["silicone"], real_sets["meat"]
     rest = rest_layout("ideal")
     silicone = ClipSet(load_dataset("silicone", SILICONE, "test"), 5, rest)
     meat = {s: ClipSet(load_dataset("meat", MEAT, s), 5, rest) for s in ("train", "val", "test")}

@@ -12,10 +12,6 @@ from palpation.mapping.samples import central_frames
 from palpation.mapping.sources import meat_trials
 from palpation.paths import REPO_ROOT
 
-SILICONE = REPO_ROOT / "results" / "data" / "silicone" / "silicone.npz"
-MEAT = REPO_ROOT / "results" / "data" / "meat" / "meat.npz"
-pytestmark = pytest.mark.skipif(not (SILICONE.exists() and MEAT.exists()),
-                                reason="needs results/data/{silicone,meat} (rules silicone_set, meat_set)")
 
 
 def noisy_scores(markers, labels, path, seed, window="full"):
@@ -26,7 +22,8 @@ def noisy_scores(markers, labels, path, seed, window="full"):
     save_npz(path, probs=probs, labels=lab)
 
 
-def test_silicone_and_meat_maps(tmp_path):
+def test_silicone_and_meat_maps(tmp_path, real_sets):
+    SILICONE, MEAT = real_sets["silicone"], real_sets["meat"]
     with np.load(SILICONE) as z:
         noisy_scores(list(z["markers"]), list(z["labels"]), tmp_path / "sil.npz", 0)
     trials = meat_trials(MEAT)

@@ -11,7 +11,6 @@ from palpation.mapping.silicone_poses import (
     SweepLayout, direction_evidence, estimate_mirror, robot_xy, silicone_poses, sweep_of)
 from palpation.paths import REPO_ROOT
 
-SILICONE = REPO_ROOT / "results" / "data" / "silicone" / "silicone.npz"
 
 
 def test_sweep_names_give_path_and_direction():
@@ -69,8 +68,8 @@ def test_no_dots_is_a_clear_error():
         estimate_mirror(np.zeros((10, 16, 4, 2)), np.zeros((10, 16), int), np.zeros(10))
 
 
-@pytest.mark.skipif(not SILICONE.exists(), reason="needs the extracted Silicone set (rule silicone_set)")
-def test_real_sweeps_land_on_the_photo_vessels():
+def test_real_sweeps_land_on_the_photo_vessels(real_sets):
+    SILICONE = real_sets["silicone"]
     from palpation.mapping.silicone_check import pose_check
 
     with np.load(SILICONE) as z:
