@@ -2,6 +2,7 @@
 #   snakemake --cores 2                                      quick profile (CPU, the default)
 #   snakemake --workflow-profile workflow/profiles/paper     paper profile (one GPU)
 #   snakemake --cores 2 bench                                benchmark JSONs under results/bench/
+#   snakemake --cores 2 selftest                             the residual loop's self-test
 
 
 include: "workflow/rules/common.smk"
@@ -11,6 +12,7 @@ include: "workflow/rules/meat.smk"
 include: "workflow/rules/twin.smk"
 include: "workflow/rules/simulate.smk"
 include: "workflow/rules/calibrate.smk"
+include: "workflow/rules/loop.smk"
 include: "workflow/rules/dataset.smk"
 include: "workflow/rules/train.smk"
 include: "workflow/rules/maps.smk"
@@ -26,8 +28,15 @@ rule all:
         rules.data_summary.output,
         rules.render_twin.output,
         rules.calibrate.output,
+        rules.loop.output,
         TRAIN_REPORT_FILES,
         rules.vessel_maps.output,
+
+
+# The loop's self-test (hidden effects in twin-made sets): snakemake --cores 2 selftest
+rule selftest:
+    input:
+        rules.loop_selftest.output,
 
 
 rule bench:

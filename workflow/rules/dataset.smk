@@ -6,7 +6,7 @@ DATASET = config.get("dataset", {})
 rule simulate_dataset:
     input:
         mesh=TWIN_MESH,
-        fit=TWIN_FIT,  # the calibrated twin sets every parameter the draws leave alone
+        fit=LOOP_FIT,  # the residual loop's final twin sets every parameter the draws leave alone
     output:
         manifest="results/sim/dataset/manifest.json",
     params:
@@ -23,5 +23,5 @@ rule simulate_dataset:
     shell:
         "{PY} palpation.apps.simulate set=randomised n_pairs={params.n_pairs} seed={params.seed}"
         " recentre_k_n={params.recentre}"
-        " {params.twin} {TWIN_FIT_ARGS} mesh={input.mesh} out.dir={params.outdir} progress=false"
+        " {params.twin} {LOOP_FIT_ARGS} mesh={input.mesh} out.dir={params.outdir} progress=false"
         " {params.hydra} > {log} 2>&1"

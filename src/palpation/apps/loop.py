@@ -1,0 +1,164 @@
+"""Hydra entry point: close the loop with measured data (issue 5).
+
+    python -m palpation.apps.loop                      the real photos: rounds, report, final twin
+    python -m palpation.apps.loop mode=selftest        hidden effects in twin-made sets, confusion table
+    python -m palpation.apps.loop measured=<stem>      any measured set in the generic format
+
+Real mode writes under out.dir: report.md, loop_real.csv, rounds.json, twin_fit/fitted.yaml (the final
+twin, loaded downstream with hydra.searchpath=[file://<out.dir>] +twin_fit=fitted), fitted_params.yaml,
+modes.png/.pdf, rounds.png/.pdf, residuals/ (quivers per photo)
+and study.db (resumable). Self-test mode: loop_selftest.csv, selftest.md, selftest.json and
+selftest/ (the generated sets and their study.db).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import time
+from pathlib import Path
+
+import hydra
+import numpy as np
+from omegaconf import DictConfig, OmegaConf
+
+from palpation.calibration.objective import marker_mae_px
+from palpation.io import save_json, save_text
+from palpation.loop import figures, report
+from palpation.loop.config import LoopConfig
+from palpation.loop.inputs import load_targets
+from palpation.loop.real import base_params, make_problem, run_loop, twin_key
+from palpation.loop.residual import decompose, image_direction_deg
+from palpation.loop.selftest import confusion, rows_csv, run_selftest, summary
+from palpation.loop.simulate import LoopSimulator, loop_twin_config
+from palpation.markers.template import rest_template
+from palpation.measured import load_measured_set
+from palpation.twin.config import TwinConfig
+from palpation.twin.mesh import SensorMesh
+
+log = logging.getLogger(__name__)
+MODES = ("real", "selftest")
+
+
+def _tracked(cfg: DictConfig, run_name: str):
+    if not cfg.track:
+        return contextlib.nullcontext()
+    from palpation.tracking import start_run
+    return start_run("loop", params=OmegaConf.to_container(cfg, resolve=True), run_name=run_name)
+
+
+def _log(metrics: dict, step: int | None = None, track: bool = True) -> None:
+    if track:
+        from palpation.tracking import log_metrics
+        log_metrics({k: v for k, v in metrics.items() if np.isfinite(v)}, step=step)
+
+
+def run(cfg: DictConfig) -> dict:
+    if cfg.mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, got '{cfg.mode}'")
+    twin: TwinConfig = OmegaConf.to_object(cfg.twin)
+    loop: LoopConfig = OmegaConf.to_object(cfg.loop).validate()
+    out = Path(cfg.out.dir)
+    mset = load_measured_set(cfg.measured)
+    source = str(cfg.measured)
+    # every input check before the mesh is loaded or anything is simulated
+    if cfg.mode == "real":
+        make_problem(mset, source, loop, {})
+    else:
+        load_targets(mset, source, loop.selftest.holdout, loop.selftest.states, loop.twist_z_angle)
+    mesh = SensorMesh.load(cfg.mesh)
+    tw = loop_twin_config(twin, loop.shell_thickness_mm * 1e-3)
+    sim = LoopSimulator(mesh, tw, rest_template(), device=twin.device, split_by_kind=loop.split(twin.device),
+                        max_frames=loop.max_frames)
+    tkey = twin_key(tw, mesh.resolution)
+    start = time.perf_counter()
+    if cfg.mode == "real":
+        result = run_real(cfg, loop, tw, mset, source, sim, tkey, out, mesh.resolution)
+    else:
+        result = run_self(cfg, loop, tw, mset, source, sim, tkey, out)
+    result.update({"wall_s": time.perf_counter() - start, "envs_simulated": sim.envs_simulated})
+    log.info("loop %s done in %.0f s (%d distinct envs simulated)", cfg.mode, result["wall_s"],
+             sim.envs_simulated)
+    return result
+
+
+def run_real(cfg, loop: LoopConfig, tw, mset, source, sim, tkey, out: Path, resolution: str) -> dict:
+    with _tracked(cfg, "real"):
+        def on_round(k, problems):
+            r = problems[0].rounds[-1]
+            a = r["after"] or r["before"]
+            _log({"mae_px/fit": a["fit"], "mae_px/heldout": a["heldout"], "mae_px/all": a["all"],
+                  "share_explained": r["share_explained"], "accepted": float(r["accepted"])}, k, cfg.track)
+
+        p = run_loop(mset, source, loop, sim.simulate, base_params(tw), out / "study.db", tkey, on_round)
+        final = p.markers
+        template = rest_template()
+        baseline = {t.name: marker_mae_px(template, t.markers) for t in p.targets}
+        decs, fig_paths = {}, []
+        for i, t in enumerate(p.targets):
+            slide = image_direction_deg(-90.0 + t.state.heading_offset_deg) if t.state.kind == "slide" else None
+            d0 = decompose(p.rounds[0]["markers_after"][i], t.markers, t.name, slide)
+            d1 = decompose(final[i], t.markers, t.name, slide)
+            decs[t.name] = [("round 0", d0), (f"final ({'+'.join(p.effects) or 'no effect'})", d1)]
+            sims = (p.rounds[0]["markers_after"][i], final[i])
+            panels = [(lab, m, d) for (lab, d), m in zip(decs[t.name], sims)]
+            fig_paths += figures.plot_state(t.markers, panels, out / "residuals" / f"residual_{t.name}")
+        flat = [(f"{n}\n{lab.split(' (')[0]}", d) for n, rows in decs.items() for lab, d in rows]
+        fig_paths += figures.plot_shares([d for _, d in flat], [lab for lab, _ in flat], out / "modes")
+        rows = report.real_rows(p)
+        fig_paths += figures.plot_rounds(rows, float(np.mean(list(baseline.values()))), out / "rounds")
+        save_text(out / "loop_real.csv", report.csv_text(rows, report.REAL_COLUMNS))
+        meta = {"source": source, "mesh": resolution, "n_trials": loop.search.n_trials,
+                "candidates": loop.effects, "final_markers": final, "bounds": loop.search.bounds}
+        save_text(out / "report.md", report.real_markdown(p, decs, baseline, meta))
+        record = {"source": source, "mesh": resolution, "rounds": len(p.rounds) - 1,
+                  "mae_px": {t.name: marker_mae_px(m, t.markers) for t, m in zip(p.targets, final)}}
+        integ = {"dt": float(tw.integrator.dt), "substeps": int(tw.integrator.substeps)}
+        option, readable = report.write_twin_fit(out, p, loop.shell_thickness_mm * 1e-3, record, integ)
+        modes = {n: [(lab, d.row()) for lab, d in rows] for n, rows in decs.items()}
+        save_json(out / "rounds.json", {"rounds": [_plain(r) for r in p.rounds], "effects": p.effects,
+                                        "params": p.params, "decompositions": modes})
+        if cfg.track:
+            from palpation.tracking import log_artifact
+            for path in (out / "report.md", out / "loop_real.csv", option, readable, *fig_paths):
+                log_artifact(path)
+    return {"effects": p.effects, "rows": rows, "params": p.params, "fitted_option": str(option)}
+
+
+def run_self(cfg, loop: LoopConfig, tw, mset, source, sim, tkey, out: Path) -> dict:
+    st = loop.selftest
+    template = load_targets(mset, source, [], st.states, loop.twist_z_angle)
+    geometry = {s.name: s for s in mset.states}
+    with _tracked(cfg, "selftest"):
+        rows, _, _ = run_selftest(loop, sim.simulate, base_params(tw), template, geometry, mset.rest,
+                                  out / "selftest", out / "selftest" / "study.db", tkey)
+        table = confusion(rows, st.effects)
+        summ = summary(rows)
+        save_text(out / "loop_selftest.csv", rows_csv(rows))
+        meta = {"low": st.strength_low, "high": st.strength_high, "noise_px": st.noise_px, "states": st.states,
+                "holdout": st.holdout, "base_effects": st.base_effects}
+        save_text(out / "selftest.md", report.selftest_markdown(rows, table, summ, meta))
+        save_json(out / "selftest.json", {"rows": rows, "confusion": table, "summary": summ})
+        for r in rows:
+            _log({"mae_before_px": r["mae_before_px"], "mae_after_px": r["mae_after_px"],
+                  "named_correctly": float(r["effect_named"] == r["effect_injected"])}, r["run"], cfg.track)
+        _log({f"summary/{k}": float(v) for k, v in summ.items()}, None, cfg.track)
+        if cfg.track:
+            from palpation.tracking import log_artifact
+            for path in (out / "loop_selftest.csv", out / "selftest.md"):
+                log_artifact(path)
+    return {"summary": summ, "confusion": table, "rows": rows}
+
+
+def _plain(r: dict) -> dict:
+    """A round record without its marker arrays (they are large and rebuilt from the params)."""
+    return {k: v for k, v in r.items() if not k.startswith("markers")}
+
+
+@hydra.main(version_base="1.3", config_path="../../../conf", config_name="loop")
+def main(cfg: DictConfig) -> None:
+    run(cfg)
+
+
+if __name__ == "__main__":
+    main()

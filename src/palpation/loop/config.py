@@ -1,0 +1,112 @@
+"""Typed settings of the residual loop (Hydra structured config `base_loop`, conf/loop/*.yaml)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional
+
+from hydra.core.config_store import ConfigStore
+
+from palpation.loop.effects import EFFECTS, PARAMS, check_effects
+
+SAMPLERS = ("gp", "tpe", "random")
+
+
+@dataclass
+class SearchSettings:
+    """One recalibration (an Optuna study per problem and round, persistent in <out>/study.db)."""
+
+    sampler: str = "gp"
+    seed: int = 42
+    n_trials: int = 10  # completed trials per study, warm starts included
+    n_startup: int = 4  # trials before the GP takes over (the warm starts count)
+    batch_size: int = 1
+    worst_px: float = 165.0  # score of a diverged trial (3 marker spacings)
+    bounds: dict[str, list[float]] = field(default_factory=dict)  # name -> [low, high], over effects.PARAMS
+    # rounds >= 1: a log-scaled parameter fitted in an earlier round is searched within this factor of its
+    # value (a trust region); 0 = off. Off by default: on the photos E moves x3 once surface contact is in.
+    trust_factor: float = 0.0
+
+
+@dataclass
+class SelftestConfig:
+    """Measured-like sets made by the twin with one hidden effect on, then the loop on each."""
+
+    effects: list[str] = field(default_factory=lambda: list(EFFECTS))
+    runs_per_effect: int = 3
+    strength_low: float = 1.0  # injected strength in nominal steps, drawn uniformly in [low, high]
+    strength_high: float = 2.5
+    noise_px: float = 0.2  # std per coordinate (SPEC §13.2: photo noise < 0.2 px)
+    base_effects: list[str] = field(default_factory=lambda: ["surface_contact"])  # on in the starting twin
+    base_params: dict[str, float] = field(default_factory=lambda: {"E": 1.2225e6, "k_s": 2.0e3})
+    states: list[str] = field(default_factory=lambda: ["press", "twist_z", "twist_x"])
+    holdout: list[str] = field(default_factory=lambda: ["twist_z"])
+    max_rounds: int = 1
+    seed: int = 0
+
+
+@dataclass
+class LoopConfig:
+    effects: list[str] = field(default_factory=lambda: list(EFFECTS))  # the candidates
+    states: Optional[list[str]] = None  # state names or kinds to use; None = every interaction state
+    holdout: list[str] = field(default_factory=lambda: ["slide"])  # scored each round, never fitted
+    twist_z_angle: str = "reference"  # quirk 5: 30 deg as the reference, or the file name's angle
+    max_rounds: int = 4
+    # an effect is kept if the held-out MAE falls by min(min_improvement_px, min_improvement_rel x its value):
+    # 0.05 px on the photos, less near a noise floor (self-test sets sit at ~0.25 px)
+    min_improvement_px: float = 0.05
+    min_improvement_rel: float = 0.05
+    tries_per_round: int = 2  # effects tried per round, best-ranked first, until one is kept
+    shell_thickness_mm: float = 1.5  # layered skin (SPEC gives no two-material values; a choice)
+    calibrate_round0: bool = True  # fit `round0_params` before any effect (round 0 = the calibrated twin)
+    round0_params: list[str] = field(default_factory=lambda: ["E"])
+    recalibrate: list[str] = field(default_factory=lambda: ["E"])  # searched every round, with the effects'
+    steps: dict[str, float] = field(default_factory=dict)  # nominal step per parameter, over effects.py
+    search: SearchSettings = field(default_factory=SearchSettings)
+    selftest: SelftestConfig = field(default_factory=SelftestConfig)
+    split_by_kind: str = "auto"  # one twin batch per kind: auto (= on the CPU), true, false
+    max_frames: Optional[int] = None  # cut every trajectory (smoke tests only)
+
+    def validate(self) -> "LoopConfig":
+        check_effects(self.effects, "loop.effects")
+        check_effects(self.selftest.effects, "loop.selftest.effects")
+        check_effects(self.selftest.base_effects, "loop.selftest.base_effects")
+        for where, names in (("loop.round0_params", self.round0_params), ("loop.recalibrate", self.recalibrate),
+                             ("loop.steps", list(self.steps)), ("loop.selftest.base_params",
+                                                                 list(self.selftest.base_params))):
+            unknown = [n for n in names if n not in PARAMS]
+            if unknown:
+                raise ValueError(f"{where}: unknown parameter(s) {unknown}; known: {sorted(PARAMS)}")
+        for name, pair in self.search.bounds.items():
+            if name not in PARAMS or len(pair) != 2 or not float(pair[0]) < float(pair[1]):
+                raise ValueError(f"loop.search.bounds.{name}: need a known parameter and [low, high] with "
+                                 f"low < high, got {pair}")
+        for s in (self.search,):
+            if s.sampler not in SAMPLERS or s.n_trials < 1 or s.n_startup < 0 or s.batch_size < 1:
+                raise ValueError(f"loop.search: need sampler in {SAMPLERS}, n_trials >= 1, n_startup >= 0, "
+                                 f"batch_size >= 1, got {s}")
+        if self.tries_per_round < 1:
+            raise ValueError(f"loop.tries_per_round={self.tries_per_round}: must be >= 1")
+        if self.max_rounds < 0 or self.selftest.max_rounds < 1 or self.selftest.runs_per_effect < 1:
+            raise ValueError("loop: need max_rounds >= 0, selftest.max_rounds >= 1 and "
+                             "selftest.runs_per_effect >= 1")
+        if not 0 < self.selftest.strength_low <= self.selftest.strength_high or self.selftest.noise_px < 0:
+            st = self.selftest
+            raise ValueError(f"loop.selftest: need 0 < strength_low <= strength_high and noise_px >= 0, got "
+                             f"{st.strength_low}, {st.strength_high}, {st.noise_px}")
+        if self.shell_thickness_mm <= 0:
+            raise ValueError(f"loop.shell_thickness_mm={self.shell_thickness_mm}: must be > 0")
+        if str(self.split_by_kind).lower() not in ("auto", "true", "false"):
+            raise ValueError(f"loop.split_by_kind must be auto, true or false, got {self.split_by_kind}")
+        return self
+
+    def split(self, device: str) -> bool:
+        mode = str(self.split_by_kind).lower()
+        return str(device).startswith("cpu") if mode == "auto" else mode == "true"
+
+
+def register_configs() -> None:
+    ConfigStore.instance().store(group="loop", name="base_loop", node=LoopConfig)
+
+
+register_configs()

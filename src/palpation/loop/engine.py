@@ -1,0 +1,244 @@
+"""The loop: residual -> signatures -> attribution -> add the best effect -> recalibrate -> repeat.
+
+Many problems (measured sets) advance in lockstep so that every twin call is one batch over all of
+them: the real photos are one problem, the self-test has one per injected set. Per round and
+problem: simulate the current twin at every state; compute each candidate's signature at the fitted
+states; name the effect the attribution ranks best; recalibrate the searched parameters plus the new
+effect's, warm-started at the attribution's linear estimate; keep the effect only if the held-out
+MAE falls by at least min(min_improvement_px, min_improvement_rel x MAE) (the fitted MAE where nothing
+is held out). A rejected effect restores the previous twin; the next-ranked one gets a try
+(`tries_per_round`), and a round with no kept effect ends that problem's loop.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from palpation.calibration.objective import marker_mae_px
+from palpation.loop.attribution import Signature, attribute, fit_subset
+from palpation.loop.config import LoopConfig
+from palpation.loop.effects import EFFECTS, PARAMS, Dof, bounds, clip, move
+from palpation.loop.inputs import Target
+from palpation.loop.recalibrate import recalibrate
+
+log = logging.getLogger(__name__)
+# warm starts along the attribution's estimate: the signature is a secant at the nominal step, so a
+# strongly nonlinear effect (damping: x33 needed, the secant at x5 says x500) overshoots
+WARM_FRACTIONS = (0.25, 0.5, 1.0)
+REFIT = "_refit"  # signature of the parameters the twin already has
+MIN_RMS_PX = 0.02  # a signature column below this RMS change is dead (attribution.fit_subset)
+
+
+@dataclass
+class Problem:
+    name: str
+    key: str  # content hash of the measured set (study names)
+    targets: list[Target]
+    params: dict[str, float]  # every loop parameter's current value
+    searched: list[str]  # recalibrated every round
+    effects: list[str] = field(default_factory=list)  # added so far
+    candidates: list[str] = field(default_factory=list)
+    rounds: list[dict] = field(default_factory=list)
+    markers: np.ndarray | None = None  # current simulated markers per target
+    trust: dict[str, tuple[float, float]] = field(default_factory=dict)  # per-round search bounds
+    refit: list = field(default_factory=list)  # refit_dofs at this round's signatures
+    done: bool = False
+
+    def fit_targets(self) -> list[Target]:
+        return [t for t in self.targets if t.fit]
+
+    def mae(self, markers: np.ndarray | None = None) -> dict[str, float]:
+        m = self.markers if markers is None else markers
+        return {t.name: marker_mae_px(x, t.markers) for t, x in zip(self.targets, m)}
+
+    def summary(self, markers: np.ndarray | None = None) -> dict[str, float]:
+        mae = self.mae(markers)
+        fit = [mae[t.name] for t in self.targets if t.fit]
+        held = [mae[t.name] for t in self.targets if not t.fit]
+        m = self.markers if markers is None else markers
+        energy = sum(float(((x - t.markers) ** 2).sum()) for t, x in zip(self.targets, m) if t.fit)
+        return {"fit": float(np.mean(fit)), "heldout": float(np.mean(held)) if held else float("nan"),
+                "all": float(np.mean(list(mae.values()))), "fit_energy": energy}
+
+
+def initial_params(base: Mapping[str, float]) -> dict[str, float]:
+    """Every loop parameter at its 'effect off' value, then `base` (E, alpha, ... of the twin)."""
+    return {**{k: p.default for k, p in PARAMS.items()}, **dict(base)}
+
+
+def evaluate(problems: list[Problem], simulate) -> None:
+    """Simulate each problem's current twin at all its states (one batch)."""
+    jobs = [(t.state, p.params) for p in problems for t in p.targets]
+    markers, failed = simulate(jobs)
+    i = 0
+    for p in problems:
+        n = len(p.targets)
+        if failed[i:i + n].any():
+            raise ValueError(f"loop '{p.name}': the current twin diverged at "
+                             f"{[t.name for t, f in zip(p.targets, failed[i:i + n]) if f]}; params {p.params}")
+        p.markers = markers[i:i + n]
+        i += n
+
+
+def refit_dofs(p: Problem) -> list[Dof]:
+    """Dofs of what the twin already has: E (x 1.25) and every added effect's dofs, both signs allowed.
+
+    Their columns turn the attribution into a Gauss-Newton step for all searched parameters at once,
+    the recalibration's warm start (adding surface contact moves E x 3 on the photos)."""
+    owned = {n for e in p.effects for n in EFFECTS[e].params}
+    dofs = []
+    for n in p.searched:
+        if n not in owned:
+            width = PARAMS[n].high - PARAMS[n].low
+            dofs.append(Dof(n, ((n, "mul", 1.25),) if PARAMS[n].log else ((n, "add", 0.1 * width),), False))
+    return dofs + [Dof(f"{e}.{d.name}", d.moves, False) for e in p.effects for d in EFFECTS[e].dofs]
+
+
+def signatures(problems: list[Problem], simulate, steps: Mapping[str, float]
+               ) -> tuple[dict[str, list[Signature]], dict[str, Signature]]:
+    """Per problem, each candidate's dof columns at the fitted states, and the columns of the parameters
+    it already has (REFIT, for the warm start): one batch over all problems."""
+    jobs, index = [], []
+    for p in problems:
+        fit = p.fit_targets()
+        groups = [(e, EFFECTS[e].dofs) for e in p.candidates] + [(REFIT, p.refit)]
+        for e, dofs in groups:
+            for dof in dofs:
+                index.append((p, e, dof, len(jobs)))
+                jobs += [(t.state, move(p.params, dof, 1.0, steps)) for t in fit]
+    markers, failed = simulate(jobs)
+    out: dict[str, list[Signature]] = {p.name: [] for p in problems}
+    cols: dict[tuple, list] = {}
+    for p, e, dof, start in index:
+        fit_ix = [i for i, t in enumerate(p.targets) if t.fit]
+        block = markers[start:start + len(fit_ix)]
+        if failed[start:start + len(fit_ix)].any():
+            log.warning("loop '%s': %s.%s diverged at its nominal step; its column is left out", p.name, e,
+                        dof.name)
+            block = p.markers[fit_ix]
+        cols.setdefault((p.name, e), []).append(((block - p.markers[fit_ix]).reshape(-1), dof))
+    refit = {}
+    for p in problems:
+        for e in [*p.candidates, REFIT]:
+            c = cols.get((p.name, e), [])
+            n = sum(t.fit for t in p.targets) * len(p.targets[0].markers) * 2
+            X = np.stack([x for x, _ in c], axis=1) if c else np.zeros((n, 0))
+            sig = Signature(e, [d.name for _, d in c], X, [d.nonneg for _, d in c])
+            if e == REFIT:
+                refit[p.name] = sig
+            else:
+                out[p.name].append(sig)
+    return out, refit
+
+
+def linear_estimate(p: Problem, effect: str, residual: np.ndarray, sig: Signature, refit: Signature,
+                    steps: Mapping[str, float], limits: Mapping | None = None,
+                    fractions=WARM_FRACTIONS) -> list[dict]:
+    """Warm starts: the joint least-squares step of the new effect's dofs and the current parameters'
+    (p.refit, as at signature time), applied at `fractions` of its length and clipped into the bounds."""
+    beta, _ = fit_subset(-np.asarray(residual).reshape(-1), [refit, sig], MIN_RMS_PX)
+    dofs = [*p.refit, *EFFECTS[effect].dofs]
+    out = []
+    for f in fractions:
+        params = dict(p.params)
+        for dof, b in zip(dofs, beta):
+            params = move(params, dof, f * float(b), steps)
+        out.append(clip(params, limits))
+    return out
+
+
+def trust_region(p: Problem, names, factor: float, overrides: Mapping | None = None) -> dict:
+    """Log-scaled parameters already fitted: search within `factor` of their value (inside the bounds)."""
+    if factor <= 1.0:
+        return {}
+    out = {}
+    for n in names:
+        if PARAMS[n].log and p.params[n] > 0:
+            low, high = bounds(n, overrides)
+            out[n] = (max(low, min(p.params[n] / factor, high)), min(high, max(p.params[n] * factor, low)))
+    return out
+
+
+def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path, twin_key: str,
+               max_rounds: int, on_round=None) -> None:
+    """Advance every problem until its loop stops; each attempt's record lands in problem.rounds.
+
+    Within a round, the effects the BIC keeps are tried in ranking order (at most cfg.tries_per_round):
+    the first whose recalibrated twin lowers the held-out MAE is kept; if none does, the loop stops.
+    """
+    steps = dict(cfg.steps)
+    for k in range(1, max_rounds + 1):
+        active = [p for p in problems if not p.done and p.candidates]
+        if not active:
+            return
+        evaluate([p for p in active if p.markers is None], simulate)  # else still current from last round
+        for p in active:
+            p.refit = refit_dofs(p)
+        sigs, refits = signatures(active, simulate, steps)
+        before, queue = {}, {}
+        for p in active:
+            fit_ix = [i for i, t in enumerate(p.targets) if t.fit]
+            residual = np.stack([p.markers[i] - p.targets[i].markers for i in fit_ix])
+            att = attribute(residual, sigs[p.name], min_rms_px=MIN_RMS_PX)
+            before[p.name] = (p.summary(), dict(p.params), p.markers.copy(), att, list(p.searched), residual)
+            kept = [r["effect"] for r in att.ranking if r["effect"] in att.best_subset]
+            queue[p.name] = kept[:cfg.tries_per_round]
+            if not queue[p.name]:
+                p.done = True
+                p.rounds.append(_record(k, p, None, att, before[p.name], None, accepted=False))
+                log.info("loop '%s' round %d: no effect explains the residual (BIC); stop", p.name, k)
+        for attempt in range(cfg.tries_per_round):
+            trying = [p for p in active if not p.done and len(queue[p.name]) > attempt]
+            if not trying:
+                break
+            warm = {}
+            for p in trying:
+                effect, att = queue[p.name][attempt], before[p.name][3]
+                old = before[p.name][4]
+                p.searched = old + [n for n in EFFECTS[effect].params if n not in old]
+                p.trust = trust_region(p, old, cfg.search.trust_factor, cfg.search.bounds)
+                sig = next(x for x in sigs[p.name] if x.effect == effect)
+                estimates = linear_estimate(p, effect, before[p.name][5], sig, refits[p.name], steps,
+                                            cfg.search.bounds)
+                warm[p.name] = [dict(before[p.name][1]), *estimates]
+            fits = recalibrate(trying, simulate, cfg.search, db_path, f"r{k}t{attempt}", twin_key, warm)
+            for p in trying:
+                p.params.update(fits[p.name]["params"])
+            evaluate(trying, simulate)
+            for p in trying:
+                effect, (b, b_params, b_markers, att, b_searched, _) = queue[p.name][attempt], before[p.name]
+                a = p.summary()
+                metric = "heldout" if np.isfinite(a["heldout"]) else "fit"
+                ok = a[metric] < b[metric] - min(cfg.min_improvement_px, cfg.min_improvement_rel * b[metric])
+                after = {**a, "fit_result": fits[p.name]}
+                p.rounds.append(_record(k, p, effect, att, before[p.name], after, ok))
+                log.info("loop '%s' round %d try %d: %s explains %.1f %% of the residual; MAE fit %.2f -> "
+                         "%.2f, held-out %.2f -> %.2f px: %s", p.name, k, attempt + 1, effect,
+                         100 * att.share_of(effect), b["fit"], a["fit"], b["heldout"], a["heldout"],
+                         "kept" if ok else "rejected")
+                if ok:
+                    p.effects.append(effect)
+                    p.candidates.remove(effect)
+                    queue[p.name] = []  # this round is done
+                else:  # the held-out error did not fall: restore the previous twin
+                    p.params, p.markers, p.searched = dict(b_params), b_markers, list(b_searched)
+        for p in active:
+            if not p.done and not any(r["round"] == k and r["accepted"] for r in p.rounds):
+                p.done = True  # every try of this round was rejected
+        if on_round is not None:
+            on_round(k, problems)
+
+
+def _record(k: int, p: Problem, effect, att, before, after, accepted: bool) -> dict:
+    b_summary, b_params, b_markers = before[:3]
+    share = att.share_of(effect) if effect else 0.0
+    return {"round": k, "effect": effect, "accepted": accepted, "share_explained": share,
+            "ranking": att.ranking, "best_subset": att.best_subset, "best_subset_share": att.best_subset_share,
+            "before": b_summary, "params_before": b_params, "markers_before": b_markers, "after": after,
+            "params_after": dict(p.params) if after else None,
+            "markers_after": p.markers.copy() if after else None}

@@ -1,0 +1,123 @@
+"""Recalibrate every problem's searched parameters with the calibration machinery, in lockstep.
+
+Each problem (a measured set in a round) gets its own persistent Optuna study in one SQLite file,
+named after a hash of everything that changes what a trial means (data, round, effects, space,
+fixed values, sampler settings), so a killed run resumes and a changed setting starts afresh. The
+studies advance together: each step asks every unfinished study for its next proposals and simulates
+all of them as one twin batch (on a GPU, one run carries all self-test sets). The objective is the
+mean marker MAE over the problem's fitted states; a diverged trial scores `worst_px`. Warm starts
+(the current values, and the attribution's linear estimate) are enqueued as the first trials.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+from pathlib import Path
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+import optuna
+
+from palpation.calibration.objective import marker_mae_px
+from palpation.calibration.search import ParamSpec, completed, make_sampler, open_study, validate_space
+from palpation.loop.config import SearchSettings
+from palpation.loop.effects import PARAMS, bounds, clip
+
+log = logging.getLogger(__name__)
+
+# simulate(jobs) -> (markers (n, 127, 2), failed (n,)); a job is (State, params)
+Simulate = Callable[[list], tuple[np.ndarray, np.ndarray]]
+
+
+def space_of(names: Sequence[str], overrides: Mapping[str, Sequence[float]] | None = None) -> list[ParamSpec]:
+    space = [ParamSpec(n, *bounds(n, overrides), PARAMS[n].log) for n in names]
+    validate_space(space, known=set(PARAMS))
+    return space
+
+
+# bump when what a trial means changes in code (warm starts, objective): old studies are then not resumed
+SEARCH_VERSION = 3
+
+
+def study_name(key: str, tag: str, space: list[ParamSpec], fixed: Mapping[str, float], s: SearchSettings,
+               twin_key: str) -> str:
+    blob = json.dumps({"version": SEARCH_VERSION, "key": key, "tag": tag, "space": [p.__dict__ for p in space],
+                       "fixed": {k: float(v) for k, v in sorted(fixed.items())}, "search": s.__dict__,
+                       "twin": twin_key}, sort_keys=True, default=str)
+    return f"loop-{tag}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
+
+
+def recalibrate(problems: list, simulate: Simulate, settings: SearchSettings, db_path: Path, tag: str,
+                twin_key: str, warm: Mapping[str, list[dict]] | None = None) -> dict[str, dict]:
+    """Search each problem's `searched` names; returns {problem name: {best params, value, trial, study}}.
+
+    `problems` carry .name, .key, .params (all values), .searched, .fit_targets(); `warm` maps a
+    problem name to proposals to enqueue (clipped into the bounds) when its study is new.
+    """
+    runs = []
+    for p in problems:
+        limits = {**settings.bounds, **p.trust}  # a problem's trust region narrows the configured bounds
+        space = space_of(p.searched, limits)
+        fixed = {k: v for k, v in p.params.items() if k not in p.searched}
+        name = study_name(p.key, tag, space, fixed, settings, twin_key)
+        sampler = make_sampler(settings.sampler, settings.seed, settings.n_startup)
+        study = open_study(Path(db_path), name, sampler, "minimize")
+        if not study.trials:
+            for w in (warm or {}).get(p.name, []):
+                study.enqueue_trial(clip({k: w[k] for k in p.searched}, limits), skip_if_exists=True)
+        runs.append({"p": p, "space": space, "study": study, "seen": {}})
+    while True:
+        asks = []
+        for run in runs:
+            done = completed(run["study"])
+            if done >= settings.n_trials:
+                continue
+            size = (settings.n_startup - done) if done < settings.n_startup else settings.batch_size
+            for _ in range(max(1, min(settings.n_trials - done, size))):
+                trial = run["study"].ask()
+                asks.append((run, trial, {s.name: trial.suggest_float(s.name, s.low, s.high, log=s.log)
+                                          for s in run["space"]}))
+        if not asks:
+            break
+        fresh = [(run, props) for run, _, props in asks if _key(props) not in run["seen"]]
+        jobs, spans = [], []
+        for run, props in fresh:
+            targets = run["p"].fit_targets()
+            spans.append((len(jobs), targets))
+            jobs += [(t.state, {**run["p"].params, **props}) for t in targets]
+        markers, failed = simulate(jobs) if jobs else (np.zeros((0, 127, 2)), np.zeros(0, bool))
+        for (run, props), (start, targets) in zip(fresh, spans):
+            block, bad = markers[start:start + len(targets)], failed[start:start + len(targets)]
+            if bad.any() or not np.all(np.isfinite(block)):
+                run["seen"][_key(props)] = (settings.worst_px, {"diverged": 1.0})
+                continue
+            mae = {t.name: marker_mae_px(m, t.markers) for t, m in zip(targets, block)}
+            value = float(np.mean(list(mae.values())))
+            run["seen"][_key(props)] = (min(value, settings.worst_px),
+                                        {"diverged": 0.0, **{f"mae_px/{k}": v for k, v in mae.items()}})
+        for run, trial, props in asks:
+            value, attrs = run["seen"][_key(props)]
+            for k, v in attrs.items():
+                trial.set_user_attr(k, v)
+            run["study"].tell(trial, value)
+    out = {}
+    for run in runs:
+        best = best_trial(run["study"])
+        out[run["p"].name] = {"params": dict(best.params), "value": float(best.value), "trial": best.number,
+                              "study": run["study"].study_name, "n_trials": completed(run["study"])}
+    return out
+
+
+def best_trial(study: optuna.Study) -> optuna.trial.FrozenTrial:
+    ok = [t for t in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))
+          if not t.user_attrs.get("diverged", 0.0)]
+    if not ok:
+        raise ValueError(f"loop study '{study.study_name}': every trial diverged; narrow the bounds in "
+                         "loop.effects.PARAMS or lower the nominal steps (loop.steps)")
+    return min(ok, key=lambda t: (t.value, t.number))
+
+
+def _key(params: Mapping[str, float]) -> tuple:
+    return tuple(sorted((k, float(v)) for k, v in params.items()))

@@ -1,0 +1,135 @@
+"""Final-frame markers of many (state, loop parameters) jobs, batched as twin environments.
+
+Every job is one measured state (kind, depth, angle) under one parameter set. Jobs that differ only
+in the camera share one simulated environment (the camera acts at projection), so a batch simulates
+each distinct physics once. Per env the mount offset composes the planned schedule (the controller
+never sees it), and the markers are projected in numpy from the final node positions with a binding
+made through that env's camera (markers.bind_markers_through). On a CPU, kinds run as separate
+batches: every env costs the longest env's frames.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, replace
+from typing import Mapping
+
+import numpy as np
+
+from palpation.loop.effects import split
+from palpation.twin.config import TwinConfig
+from palpation.twin.markers import CameraBinding, ImageSimilarity, bind_markers_through, project_markers_np
+from palpation.twin.mesh import SensorMesh
+from palpation.twin.runner import EnvRequest, plan_requests
+from palpation.twin.simulator import BatchedTwin
+from palpation.twin.trajectory import mount_offset, padded_schedule, with_mount
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class State:
+    """One interaction state to reproduce (geometry as the twin takes it)."""
+
+    name: str
+    kind: str
+    depth_mm: float | None = None
+    angle_deg: float | None = None
+    heading_offset_deg: float = 0.0
+
+
+Job = tuple[State, Mapping[str, float]]
+
+
+def loop_twin_config(cfg: TwinConfig, shell_thickness_m: float) -> TwinConfig:
+    """The twin the loop varies per env: phantom contact on (k_s = 0 keeps it inert), the layered kernel
+    on (ratio 1 and the config's alpha reproduce the reference kernel bit for bit), camera and mount
+    nominal in the config because the loop carries them per env."""
+    if not cfg.camera.is_identity or not cfg.mount.is_identity or cfg.markers.anchor != 0.0:
+        raise ValueError("loop: twin.camera, twin.mount and twin.markers must be nominal; the loop sets them "
+                         "per env (cam_*, mount_* and marker_anchor parameters)")
+    k_s = cfg.contact.k_s if cfg.contact.phantom_contact else 0.0  # off stays off until the loop adds it
+    c = replace(cfg, contact=replace(cfg.contact, phantom_contact=True, k_s=k_s),
+                material=replace(cfg.material, shell_thickness=shell_thickness_m),
+                damping=replace(cfg.damping, per_env=True))
+    return c.validate()
+
+
+class LoopSimulator:
+    def __init__(self, mesh: SensorMesh, cfg: TwinConfig, template_px: np.ndarray, device: str | None = None,
+                 split_by_kind: bool | None = None, max_frames: int | None = None):
+        self.mesh, self.cfg, self.template = mesh, cfg, np.asarray(template_px, np.float64)
+        self.device = device or cfg.device
+        self.split = str(self.device).startswith("cpu") if split_by_kind is None else bool(split_by_kind)
+        self.max_frames = max_frames
+        self._bindings: dict[tuple, CameraBinding] = {}
+        self.envs_simulated = 0  # distinct physics simulated so far (for the budget log)
+
+    def binding(self, camera: Mapping[str, float]) -> CameraBinding:
+        image = ImageSimilarity(**{k: float(v) for k, v in camera.items()})
+        key = (image.f_scale, image.rotation_deg, image.dx_px, image.dy_px)
+        if key not in self._bindings:
+            self._bindings[key] = bind_markers_through(self.mesh.nodes, self.mesh.dome_nodes, self.template,
+                                                       image)
+        return self._bindings[key]
+
+    def simulate(self, jobs: list[Job]) -> tuple[np.ndarray, np.ndarray]:
+        """(n, 127, 2) float64 pixels (NaN where the env diverged) and (n,) failed flags."""
+        if not jobs:
+            return np.zeros((0, len(self.template), 2)), np.zeros(0, bool)
+        parts = [split(params) for _, params in jobs]
+        physics = [(s.kind, s.depth_mm, s.angle_deg, s.heading_offset_deg, tuple(sorted(env.items())),
+                    tuple(sorted(mount.items()))) for (s, _), (env, _, mount, _) in zip(jobs, parts)]
+        unique = list(dict.fromkeys(physics))
+        groups = [unique] if not self.split else [[u for u in unique if u[0] == k]
+                                                  for k in dict.fromkeys(u[0] for u in unique)]
+        nodes, poses, failed = {}, {}, {}
+        for group in groups:
+            n_A, T, bad = self._run(group)
+            for i, key in enumerate(group):
+                nodes[key], poses[key], failed[key] = n_A[i], T[i], bad[i]
+        self.envs_simulated += len(unique)
+        out = np.full((len(jobs), len(self.template), 2), np.nan)
+        bad_out = np.zeros(len(jobs), bool)
+        for j, (key, (_, camera, _, markers)) in enumerate(zip(physics, parts)):
+            if failed[key]:
+                bad_out[j] = True
+                continue
+            through = self.binding(camera)
+            out[j] = through.markers(project_markers_np(through.binding, nodes[key][None], poses[key][None])[0])
+            # anchor: move the (nominal) bound rest onto the template, as twin.config.MarkerConfig
+            out[j] += markers.get("anchor", 0.0) * (self.template - through.anchor_px)
+        return out, bad_out
+
+    def _run(self, group: list[tuple]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Simulate distinct physics to their last frame: final nodes (n, N, 3), poses, failed flags."""
+        reqs = [EnvRequest(kind=k, depth_mm=d, angle_deg=a, heading_offset_deg=h, record="last")
+                for k, d, a, h, _, _ in group]
+        trajs = plan_requests(self.mesh, self.cfg, reqs, self.max_frames)
+        trajs = [with_mount(t, mount_offset(**{"dz_m" if k == "dz" else k: v for k, v in mount}))
+                 if mount else t for t, (*_, mount) in zip(trajs, group)]
+        schedule, lengths = padded_schedule(trajs)
+        env = {}
+        for i, (*_, params, _) in enumerate(group):
+            for k, v in params:
+                env.setdefault(k, {})[i] = v
+        defaults = self._defaults()
+        arrays = {k: np.array([vals.get(i, defaults[k]) for i in range(len(group))]) for k, vals in env.items()}
+        sim = BatchedTwin(self.mesh, len(group), self.cfg, {**arrays, "vessel": False}, device=self.device)
+        sim.reset(np.stack([t.T_BA0 for t in trajs]))
+        nodes = np.full((len(group), self.mesh.n_nodes, 3), np.nan, np.float32)
+        failed = np.zeros(len(group), bool)
+        ends = {int(e) - 1 for e in lengths}
+        for f in range(len(schedule)):
+            sim.step_frame(schedule[f])
+            if f in ends:  # read only where some env ends; the failure flag is sticky
+                done = lengths - 1 == f
+                nodes[done] = sim.positions_world()[done]
+                failed[done] = sim.failed()[done]
+        T_last = np.stack([t.T_BA[-1] for t in trajs])
+        return nodes, T_last, failed | ~np.all(np.isfinite(nodes), axis=(1, 2))
+
+    def _defaults(self) -> dict[str, float]:
+        c, m = self.cfg.contact, self.cfg.material
+        return {"E": m.E, "nu": m.nu, "k_n": c.k_n, "c_n": c.c_n, "k_t": c.k_t, "mu": c.mu, "k_s": c.k_s,
+                "c_s": c.c_s, "alpha": self.cfg.damping.alpha, "shell_ratio": m.shell_ratio}
