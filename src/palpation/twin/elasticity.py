@@ -43,6 +43,21 @@ def deposit_forces(f: wp.array[wp.vec3], fs: wp.array[wp.vec3], t: int, slot_off
         wp.atomic_add(f, i3, -(g0 + g1 + g2))
 
 
+@wp.func
+def tet_forces(x0: wp.vec3, x1: wp.vec3, x2: wp.vec3, x3: wp.vec3, v0: wp.vec3, v1: wp.vec3,
+               v2: wp.vec3, v3: wp.vec3, B: wp.mat33, mu: float, lam: float, alpha: float, beta: float):
+    """Elastic + damping force on nodes 0-2 of one tet (node 3 takes minus their sum)."""
+    ds = wp.matrix_from_cols(x0 - x3, x1 - x3, x2 - x3)
+    P = neo_hookean_stress(ds @ B, mu, lam)
+    vol = wp.abs(wp.determinant(ds)) / 6.0  # current volume: reference quirk 11
+    H = -vol * (P @ wp.transpose(B))
+    # damping acts on velocities relative to node 3 and is not mass weighted (SPEC §2.3)
+    g0 = (1.0 - beta) * wp.vec3(H[0, 0], H[1, 0], H[2, 0]) - alpha * (v0 - v3)
+    g1 = (1.0 - beta) * wp.vec3(H[0, 1], H[1, 1], H[2, 1]) - alpha * (v1 - v3)
+    g2 = (1.0 - beta) * wp.vec3(H[0, 2], H[1, 2], H[2, 2]) - alpha * (v2 - v3)
+    return g0, g1, g2
+
+
 @wp.kernel
 def eval_elastic_forces(
     x: wp.array[wp.vec3],
@@ -68,17 +83,8 @@ def eval_elastic_forces(
     i1 = tets[t, 1] + off
     i2 = tets[t, 2] + off
     i3 = tets[t, 3] + off
-    x3 = x[i3]
-    ds = wp.matrix_from_cols(x[i0] - x3, x[i1] - x3, x[i2] - x3)
-    B = dm_inv[t]
-    P = neo_hookean_stress(ds @ B, env_mu[env], env_lam[env])
-    vol = wp.abs(wp.determinant(ds)) / 6.0  # current volume: reference quirk 11
-    H = -vol * (P @ wp.transpose(B))
-    # damping acts on velocities relative to node 3 and is not mass weighted (SPEC §2.3)
-    v3 = v[i3]
-    g0 = (1.0 - beta) * wp.vec3(H[0, 0], H[1, 0], H[2, 0]) - alpha * (v[i0] - v3)
-    g1 = (1.0 - beta) * wp.vec3(H[0, 1], H[1, 1], H[2, 1]) - alpha * (v[i1] - v3)
-    g2 = (1.0 - beta) * wp.vec3(H[0, 2], H[1, 2], H[2, 2]) - alpha * (v[i2] - v3)
+    g0, g1, g2 = tet_forces(x[i0], x[i1], x[i2], x[i3], v[i0], v[i1], v[i2], v[i3], dm_inv[t],
+                            env_mu[env], env_lam[env], alpha, beta)
     deposit_forces(f, fs, t, env * n_slots, i0, i1, i2, i3, g0, g1, g2, gather)
 
 
@@ -115,18 +121,9 @@ def eval_elastic_forces_layered(
     i1 = tets[t, 1] + off
     i2 = tets[t, 2] + off
     i3 = tets[t, 3] + off
-    x3 = x[i3]
-    ds = wp.matrix_from_cols(x[i0] - x3, x[i1] - x3, x[i2] - x3)
-    B = dm_inv[t]
     scale = 1.0 + (env_shell_ratio[env] - 1.0) * tet_shell[t]
-    P = neo_hookean_stress(ds @ B, scale * env_mu[env], scale * env_lam[env])
-    vol = wp.abs(wp.determinant(ds)) / 6.0
-    H = -vol * (P @ wp.transpose(B))
-    alpha = env_alpha[env]
-    v3 = v[i3]
-    g0 = (1.0 - beta) * wp.vec3(H[0, 0], H[1, 0], H[2, 0]) - alpha * (v[i0] - v3)
-    g1 = (1.0 - beta) * wp.vec3(H[0, 1], H[1, 1], H[2, 1]) - alpha * (v[i1] - v3)
-    g2 = (1.0 - beta) * wp.vec3(H[0, 2], H[1, 2], H[2, 2]) - alpha * (v[i2] - v3)
+    g0, g1, g2 = tet_forces(x[i0], x[i1], x[i2], x[i3], v[i0], v[i1], v[i2], v[i3], dm_inv[t],
+                            scale * env_mu[env], scale * env_lam[env], env_alpha[env], beta)
     deposit_forces(f, fs, t, env * n_slots, i0, i1, i2, i3, g0, g1, g2, gather)
 
 
