@@ -85,10 +85,12 @@ def run(cfg: DictConfig) -> dict:
 def run_real(cfg, loop: LoopConfig, tw, mset, source, sim, tkey, out: Path, resolution: str) -> dict:
     with _tracked(cfg, "real"):
         def on_round(k, problems):
-            r = problems[0].rounds[-1]
-            a = r["after"] or r["before"]
+            p = problems[0]  # the twin kept after round k (a rejected try is restored)
+            kept = [r for r in p.rounds if r["round"] == k and r["accepted"]]
+            a = p.summary()
             _log({"mae_px/fit": a["fit"], "mae_px/heldout": a["heldout"], "mae_px/all": a["all"],
-                  "share_explained": r["share_explained"], "accepted": float(r["accepted"])}, k, cfg.track)
+                  "share_explained": kept[0]["share_explained"] if kept else 0.0,
+                  "tries": float(sum(r["round"] == k for r in p.rounds))}, k, cfg.track)
 
         p = run_loop(mset, source, loop, sim.simulate, base_params(tw), out / "study.db", tkey, on_round)
         final = p.markers

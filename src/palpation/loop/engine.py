@@ -28,8 +28,11 @@ from palpation.loop.recalibrate import recalibrate
 
 log = logging.getLogger(__name__)
 # warm starts along the attribution's estimate: the signature is a secant at the nominal step, so a
-# strongly nonlinear effect (damping: x33 needed, the secant at x5 says x500) overshoots
+# strongly nonlinear effect (damping: x33 needed, the secant at x5 says x500) overshoots. Two kinds:
+# the new effect alone (the rest as is) and jointly with the current parameters (a Gauss-Newton step;
+# adding surface contact moves E x3 on the photos). Either can be the better start, so both are tried.
 WARM_FRACTIONS = (0.25, 0.5, 1.0)
+JOINT_FRACTIONS = (0.5, 1.0)
 REFIT = "_refit"  # signature of the parameters the twin already has
 MIN_RMS_PX = 0.02  # a signature column below this RMS change is dead (attribution.fit_subset)
 
@@ -137,18 +140,21 @@ def signatures(problems: list[Problem], simulate, steps: Mapping[str, float]
 
 
 def linear_estimate(p: Problem, effect: str, residual: np.ndarray, sig: Signature, refit: Signature,
-                    steps: Mapping[str, float], limits: Mapping | None = None,
-                    fractions=WARM_FRACTIONS) -> list[dict]:
-    """Warm starts: the joint least-squares step of the new effect's dofs and the current parameters'
-    (p.refit, as at signature time), applied at `fractions` of its length and clipped into the bounds."""
-    beta, _ = fit_subset(-np.asarray(residual).reshape(-1), [refit, sig], MIN_RMS_PX)
-    dofs = [*p.refit, *EFFECTS[effect].dofs]
+                    steps: Mapping[str, float], limits: Mapping | None = None) -> list[dict]:
+    """Warm starts: the least-squares step of the new effect's dofs alone (WARM_FRACTIONS of it) and
+    jointly with the current parameters' (p.refit, as at signature time; JOINT_FRACTIONS), clipped."""
+    y = -np.asarray(residual).reshape(-1)
+    alone, _ = fit_subset(y, [sig], MIN_RMS_PX)
+    joint, _ = fit_subset(y, [refit, sig], MIN_RMS_PX)
+    plans = [(EFFECTS[effect].dofs, alone, WARM_FRACTIONS), ([*p.refit, *EFFECTS[effect].dofs], joint,
+                                                              JOINT_FRACTIONS)]
     out = []
-    for f in fractions:
-        params = dict(p.params)
-        for dof, b in zip(dofs, beta):
-            params = move(params, dof, f * float(b), steps)
-        out.append(clip(params, limits))
+    for dofs, beta, fractions in plans:
+        for f in fractions:
+            params = dict(p.params)
+            for dof, b in zip(dofs, beta):
+                params = move(params, dof, f * float(b), steps)
+            out.append(clip(params, limits))
     return out
 
 

@@ -38,7 +38,7 @@ def space_of(names: Sequence[str], overrides: Mapping[str, Sequence[float]] | No
 
 
 # bump when what a trial means changes in code (warm starts, objective): old studies are then not resumed
-SEARCH_VERSION = 3
+SEARCH_VERSION = 4
 
 
 def study_name(key: str, tag: str, space: list[ParamSpec], fixed: Mapping[str, float], s: SearchSettings,
