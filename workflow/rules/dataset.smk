@@ -1,4 +1,4 @@
-# The domain-randomised Sim dataset (SPEC §7): per trial heading, k_n, c_n drawn from one seeded
+# The domain-randomised Sim dataset (SPEC §7, conf/dataset/sim.yaml): per trial heading, k_n, c_n drawn from one seeded
 # stream; even files over the vessel, odd without. Split 70/15/15 by sorted id at load time.
 DATASET = config.get("dataset", {})
 
@@ -6,6 +6,7 @@ DATASET = config.get("dataset", {})
 rule simulate_dataset:
     input:
         mesh=TWIN_MESH,
+        conf="conf/dataset/sim.yaml",
         fit=LOOP_FIT,  # the residual loop's final twin sets every parameter the draws leave alone
     output:
         manifest="results/sim/dataset/manifest.json",
@@ -22,6 +23,6 @@ rule simulate_dataset:
         "results/logs/sim/simulate_dataset.log",
     shell:
         "{PY} palpation.apps.simulate set=randomised n_pairs={params.n_pairs} seed={params.seed}"
-        " recentre_k_n={params.recentre}"
+        " dataset.recentre_k_n={params.recentre}"
         " {params.twin} {LOOP_FIT_ARGS} mesh={input.mesh} out.dir={params.outdir} progress=false"
         " {params.hydra} > {log} 2>&1"

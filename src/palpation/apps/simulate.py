@@ -70,7 +70,7 @@ def run(cfg: DictConfig) -> dict:
     twin: TwinConfig = OmegaConf.to_object(cfg.twin)
     mesh = SensorMesh.load(cfg.mesh)
     # quirk 4: optionally centre the k_n draws on the twin's (fitted) k_n, in reference units
-    centre = twin.contact.k_n * REF_LENGTH_SCALE if cfg.get("recentre_k_n", False) else None
+    centre = twin.contact.k_n * REF_LENGTH_SCALE if cfg.dataset.recentre_k_n else None
     requests = trajectory_set(cfg.set, cfg.seed, cfg.n_pairs, cfg.heading_offset_deg,
                               k_n_draw_range(centre))
     records, failed, wall = [], [], 0.0
