@@ -82,10 +82,13 @@ rule train:
         hydra=lambda wildcards, output: hydra_dir(output.metrics),
         profile=PROFILE,
         device=config.get("device", "cpu"),
+    threads: TRAIN.get("threads", 1)
     resources:
         gpu=1 if config.get("device") == "cuda" else 0,
     shell:
-        "PALPATION_PROFILE={params.profile} SNAKEMAKE_RULE=train {PY} palpation.apps.train"
+        # train.threads (paper profile) caps torch's CPU threads so that parallel runs do not oversubscribe
+        ("OMP_NUM_THREADS={threads} " if "threads" in TRAIN else "")
+        + "PALPATION_PROFILE={params.profile} SNAKEMAKE_RULE=train {PY} palpation.apps.train"
         " experiment={wildcards.exp} seed={wildcards.seed} clip_len={wildcards.clip_len}"
         " device={params.device} {params.overrides} {params.hydra} > {log} 2>&1"
 

@@ -12,7 +12,7 @@ rc=$?
 echo "snakemake rc=$rc after $(( $(date +%s) - start )) s"
 grep -E "steps \(|Error|Exiting" "$out/snakemake.log" | tail -5
 tar czf "$out/paper_results.tgz" --exclude='*.npz' --exclude='*.pt' --exclude='*.mp4' \
-  results/train/report results/maps results/calibration results/bench results/data/summary.csv \
+  results/train/report results/maps results/calibration results/loop results/README.md results/bench results/data/summary.csv \
   results/data/summary.md results/logs $(ls -d results/train/*/L*/seed*/metrics.json 2>/dev/null) \
   2>/dev/null
 exit $rc
