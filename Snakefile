@@ -30,6 +30,7 @@ rule all:
         rules.calibrate.output,
         rules.loop.output,
         TRAIN_REPORT_FILES,
+        TWIN_ABLATION_FILES,
         rules.vessel_maps.output,
 
 

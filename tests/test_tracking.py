@@ -44,3 +44,12 @@ def test_artifacts_go_under_results_not_cwd(results_tmp, tmp_path, monkeypatch):
         tracking.log_artifact(art)
     assert not (tmp_path / "mlruns").exists()
     assert list((results_tmp / "mlartifacts" / "artefacts").rglob("a.txt"))
+
+
+def test_git_commit_override(monkeypatch):
+    from palpation.tracking import git_commit
+
+    monkeypatch.setenv("PALPATION_GIT_COMMIT", "abc123")
+    assert git_commit() == "abc123"
+    monkeypatch.delenv("PALPATION_GIT_COMMIT")
+    assert git_commit() != "abc123"

@@ -38,6 +38,9 @@ def _lock_path(uri: str) -> Path:
 
 
 def git_commit() -> str:
+    """HEAD of the checkout, or $PALPATION_GIT_COMMIT where the tree was copied without its history."""
+    if os.environ.get("PALPATION_GIT_COMMIT"):
+        return os.environ["PALPATION_GIT_COMMIT"]
     try:
         out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO_ROOT, capture_output=True,
                              text=True, timeout=10)

@@ -1,32 +1,17 @@
 """The report app on hand-made run folders: CSV columns, best-of-five, Markdown beside the paper, Fig. 6."""
 
 import json
-import zlib
 
-import numpy as np
 import pandas as pd
 from hydra import compose, initialize_config_dir
 
 from palpation.apps.report import run
-from palpation.io import save_json, save_npz
-from palpation.metrics.classification import marker_metrics
 from palpation.paths import REPO_ROOT
-from palpation.report.runs import run_dir
 
 CONFIGS = ["A-to-A", "A-to-B", "A-to-C", "C-to-B"]
 
 
-def fake_run(root, config, clip_len, seed):
-    rng = np.random.default_rng(zlib.crc32(f"{config}{clip_len}{seed}".encode()))
-    labels = (rng.random(500) < 0.1).astype(np.int8)
-    probs = np.clip(0.3 * labels + rng.random(500) * (0.5 + 0.1 * seed), 0, 1).astype(np.float32)
-    out = run_dir(root, config, clip_len, seed)
-    save_npz(out / "scores.npz", probs=probs, labels=labels)
-    save_json(out / "metrics.json", {"test": marker_metrics(probs, labels), "train_seconds": 1.5,
-                                     "device": "cpu"})
-
-
-def test_report_tables_and_figure(tmp_path):
+def test_report_tables_and_figure(tmp_path, fake_run):
     root, out = tmp_path / "train", tmp_path / "report"
     for c in CONFIGS:
         for s in (0, 1):

@@ -17,6 +17,7 @@ rule simulate_dataset:
         n_pairs=DATASET.get("n_pairs", 250),
         seed=DATASET.get("seed", 42),
         recentre=str(DATASET.get("recentre_k_n", False)).lower(),
+        fit_args=LOOP_FIT_ARGS,
     resources:
         gpu=GPU,
     log:
@@ -24,5 +25,20 @@ rule simulate_dataset:
     shell:
         "{PY} palpation.apps.simulate set=randomised n_pairs={params.n_pairs} seed={params.seed}"
         " dataset.recentre_k_n={params.recentre}"
-        " {params.twin} {LOOP_FIT_ARGS} mesh={input.mesh} out.dir={params.outdir} progress=false"
+        " {params.twin} {params.fit_args} mesh={input.mesh} out.dir={params.outdir} progress=false"
         " {params.hydra} > {log} 2>&1"
+
+
+# Ablation (train.twin_ablation): the same draws simulated with the calibration-only twin, the one
+# the paper trains on, so that what the loop's twin does to sim-to-real transfer is measured.
+use rule simulate_dataset as simulate_dataset_calibrated with:
+    input:
+        mesh=TWIN_MESH,
+        conf="conf/dataset/sim.yaml",
+        fit=TWIN_FIT,
+    output:
+        manifest="results/sim/dataset_calibrated/manifest.json",
+    params:
+        fit_args=TWIN_FIT_ARGS,
+    log:
+        "results/logs/sim/simulate_dataset_calibrated.log",

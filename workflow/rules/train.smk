@@ -26,13 +26,13 @@ EXPERIMENTS = {
 }
 
 
-def train_data(wildcards):
-    return {name: TRAIN_DATA[name] for name in EXPERIMENTS[wildcards.exp][0]}
+def train_data(wildcards, sim=TRAIN_DATA["sim"]):
+    return {name: sim if name == "sim" else TRAIN_DATA[name] for name in EXPERIMENTS[wildcards.exp][0]}
 
 
-def train_overrides(wildcards):
+def train_overrides(wildcards, sim=TRAIN_DATA["sim"]):
     """Dataset paths and the profile's size knobs for this configuration's model, as Hydra overrides."""
-    data = [f"data.{k}={v}" for k, v in train_data(wildcards).items()]
+    data = [f"data.{k}={v}" for k, v in train_data(wildcards, sim).items()]
     sizes = TRAIN.get("sizes", {}).get(EXPERIMENTS[wildcards.exp][1]) or {}
     knobs = [f"train.{k}={v}" for k, v in sizes.items() if v is not None]
     return " ".join(data + knobs + [f"recipe={TRAIN.get('recipe', 'reference')}"])
@@ -88,7 +88,7 @@ rule train:
     shell:
         # train.threads (paper profile) caps torch's CPU threads so that parallel runs do not oversubscribe
         ("OMP_NUM_THREADS={threads} " if "threads" in TRAIN else "")
-        + "PALPATION_PROFILE={params.profile} SNAKEMAKE_RULE=train {PY} palpation.apps.train"
+        + "PALPATION_PROFILE={params.profile} SNAKEMAKE_RULE={rule} {PY} palpation.apps.train"
         " experiment={wildcards.exp} seed={wildcards.seed} clip_len={wildcards.clip_len}"
         " device={params.device} {params.overrides} {params.hydra} > {log} 2>&1"
 
@@ -117,3 +117,52 @@ rule train_report:
         "{PY} palpation.apps.report profile={params.profile} runs_root={params.runs_root}"
         " out_dir={params.out_dir} 'experiments={params.experiments}' 'seeds={params.seeds}'"
         " clip_len={params.clip_len} {params.ablation} hydra.run.dir={params.out_dir} > {log} 2>&1"
+
+
+# Dataset-twin ablation (train.twin_ablation: {experiments, seeds}; empty seeds skip it): the same
+# models trained on Sim data from the calibration-only twin, beside the main sweep's loop-twin data.
+TWIN_ABL = TRAIN.get("twin_ablation") or {}
+TWIN_ABL_SIM = "results/sim/dataset_calibrated/manifest.json"  # rule simulate_dataset_calibrated
+TWIN_ABL_RUN = f"{TRAIN_DIR}/twin_calibrated/{{exp}}/L{{clip_len}}/seed{{seed}}"
+TWIN_ABLATION_FILES = (
+    [f"{TRAIN_REPORT}/twin_ablation.csv", f"{TRAIN_REPORT}/twin_ablation.md"] if TWIN_ABL.get("seeds") else []
+)
+
+
+use rule train as train_twin_ablation with:
+    input:
+        unpack(lambda wildcards: train_data(wildcards, TWIN_ABL_SIM)),
+    output:
+        metrics=f"{TWIN_ABL_RUN}/metrics.json",
+        scores=f"{TWIN_ABL_RUN}/scores.npz",
+        pr=f"{TWIN_ABL_RUN}/pr.npz",
+        checkpoint=f"{TWIN_ABL_RUN}/checkpoint.pt",
+    log:
+        "results/logs/train/twin_calibrated_{exp}_L{clip_len}_seed{seed}.log",
+    params:
+        overrides=lambda wildcards: train_overrides(wildcards, TWIN_ABL_SIM),
+
+
+def twin_ablation_runs(twin_run):
+    return expand(f"{twin_run}/metrics.json", exp=TWIN_ABL.get("experiments", ["A-to-B"]),
+                  clip_len=TRAIN.get("clip_len", 5), seed=TWIN_ABL.get("seeds", []))
+
+
+rule twin_ablation_report:
+    input:
+        loop=twin_ablation_runs(TRAIN_RUN),
+        calibrated=twin_ablation_runs(TWIN_ABL_RUN),
+        conf="conf/twin_ablation.yaml",
+    output:
+        TWIN_ABLATION_FILES,
+    log:
+        "results/logs/twin_ablation.log",
+    params:
+        experiments=yaml_list(TWIN_ABL.get("experiments", ["A-to-B"])),
+        seeds=yaml_list(TWIN_ABL.get("seeds", [])),
+        clip_len=TRAIN.get("clip_len", 5),
+        profile=PROFILE,
+    shell:
+        "{PY} palpation.apps.twin_ablation profile={params.profile} 'experiments={params.experiments}'"
+        " 'seeds={params.seeds}' clip_len={params.clip_len} twins.loop={TRAIN_DIR}"
+        " twins.calibrated={TRAIN_DIR}/twin_calibrated out_dir={TRAIN_REPORT} > {log} 2>&1"

@@ -5,6 +5,7 @@
 set -uo pipefail
 out=$1; shift
 export PYTHONPATH="$PWD/src${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
+# a copied tree may carry stale git metadata: pass PALPATION_GIT_COMMIT=<sha> to record the right commit
 start=$(date +%s)
 timeout -s INT "${SNAKE_TIMEOUT:-0}" python3 -m snakemake --workflow-profile workflow/profiles/paper --cores 16 --keep-going "$@" \
   > "$out/snakemake.log" 2>&1

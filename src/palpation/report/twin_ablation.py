@@ -1,0 +1,48 @@
+"""Does the residual loop's twin make better training data? The same Sim draws simulated with the
+calibration-only twin (the paper's pipeline) and with the loop's final twin, same models and seeds,
+scored on the same real test set. One row per (dataset twin, configuration)."""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from palpation.metrics.aggregate import summarise_seeds
+from palpation.report.paper import CONFIG_TITLES, SEED_SWEEP
+from palpation.report.tables import markdown, pm
+
+COLUMNS = ("dataset_twin", "experiment", "n_seeds", "auroc_mean", "auroc_std", "ap_mean", "ap_std",
+           "fg_iou_mean", "bg_iou_mean")
+METRICS = ("auroc", "ap", "fg_iou", "bg_iou")
+
+
+def twin_ablation(runs_by_twin: dict[str, list[dict]]) -> pd.DataFrame:
+    """runs_by_twin: dataset twin name -> metric records of palpation.report.runs.load_runs."""
+    rows = []
+    for twin, runs in runs_by_twin.items():
+        for config in dict.fromkeys(r["config"] for r in runs):
+            mine = [r for r in runs if r["config"] == config]
+            row = {"dataset_twin": twin, "experiment": config, "n_seeds": len(mine)}
+            for m in METRICS:
+                s = summarise_seeds([r[m] for r in mine])
+                row[f"{m}_mean"] = s["mean"]
+                if f"{m}_std" in COLUMNS:
+                    row[f"{m}_std"] = s["std"] if s["n"] > 1 else float("nan")
+            rows.append(row)
+    return pd.DataFrame(rows, columns=list(COLUMNS))
+
+
+def twin_ablation_markdown(runs_by_twin: dict[str, list[dict]], profile: str) -> str:
+    rows = []
+    configs = dict.fromkeys(r["config"] for runs in runs_by_twin.values() for r in runs)
+    for config in configs:
+        for twin, runs in runs_by_twin.items():
+            mine = [r for r in runs if r["config"] == config]
+            if mine:
+                rows.append([f"{config} ({CONFIG_TITLES.get(config, config)})", f"{twin} twin",
+                             len(mine)] + [pm([r[m] for r in mine]) for m in METRICS])
+        if config in SEED_SWEEP:
+            rows.append([config, "paper (calibrated twin)", 5]
+                        + [f"{SEED_SWEEP[config][m][0]:.4f} ± {SEED_SWEEP[config][m][1]:.4f}" for m in METRICS])
+    return (f"# Dataset twin ablation ({profile} profile): mean ± sample std over seeds\n\n"
+            "Same Sim draws, models and seeds; only the twin that simulated the training set differs.\n\n"
+            + markdown(["Config", "Sim data from", "seeds", "AUROC", "AP", "FG IoU", "BG IoU"], rows))
