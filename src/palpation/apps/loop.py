@@ -92,7 +92,8 @@ def run_real(cfg, loop: LoopConfig, tw, mset, source, sim, tkey, out: Path, reso
                   "share_explained": kept[0]["share_explained"] if kept else 0.0,
                   "tries": float(sum(r["round"] == k for r in p.rounds))}, k, cfg.track)
 
-        p = run_loop(mset, source, loop, sim.simulate, base_params(tw), out / "study.db", tkey, on_round)
+        p = run_loop(mset, source, loop, sim.simulate, base_params(tw), out / "study.db", tkey, on_round,
+                     progress=bool(cfg.progress))
         final = p.markers
         template = rest_template()
         baseline = {t.name: marker_mae_px(template, t.markers) for t in p.targets}
@@ -133,7 +134,8 @@ def run_self(cfg, loop: LoopConfig, tw, mset, source, sim, tkey, out: Path) -> d
     geometry = {s.name: s for s in mset.states}
     with _tracked(cfg, "selftest"):
         rows, _, _ = run_selftest(loop, sim.simulate, base_params(tw), template, geometry, mset.rest,
-                                  out / "selftest", out / "selftest" / "study.db", tkey)
+                                  out / "selftest", out / "selftest" / "study.db", tkey,
+                                  progress=bool(cfg.progress))
         table = confusion(rows, st.effects)
         summ = summary(rows)
         save_text(out / "loop_selftest.csv", rows_csv(rows))

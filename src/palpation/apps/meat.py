@@ -24,7 +24,7 @@ log = logging.getLogger(__name__)
 
 def run(cfg: DictConfig) -> dict:
     video = Path(cfg.video)
-    panels = read_states(video, ["ground_truth", "hard_prediction"])
+    panels = read_states(video, ["ground_truth", "hard_prediction"], progress=bool(cfg.progress))
     template = rest_template(cfg.template_photo)
     data = build_meat(panels["ground_truth"], panels["hard_prediction"], template,
                       scope=cfg.similarity_scope, source=str(video))

@@ -40,7 +40,8 @@ def _build(cfg: DictConfig) -> dict:
     params = sil.SiliconeParams(**OmegaConf.to_container(cfg.detector, resolve=True))
     video = Path(cfg.video)
     template = rest_template(cfg.template_photo)
-    data = sil.build_silicone_set(video, list(cfg.videos), int(cfg.n_frames), params, template)
+    data = sil.build_silicone_set(video, list(cfg.videos), int(cfg.n_frames), params, template,
+                                  progress=bool(cfg.progress))
     meta = metadata(data, video, params)
     fig = overview_figure(data, video, [tuple(x) for x in cfg.overview]) if cfg.figure else None
 

@@ -47,7 +47,8 @@ def run(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
     params = OmegaConf.to_container(cfg, resolve=True)
     params.pop("hydra", None)
     params["recipe"].pop("sizes", None)  # the chosen sizes are in train.*
-    return run_job(job, out_dir, params=params, track=bool(cfg.tracking), tags=_overrides())
+    return run_job(job, out_dir, params=params, track=bool(cfg.tracking), tags=_overrides(),
+                   progress=bool(cfg.progress))
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="train")

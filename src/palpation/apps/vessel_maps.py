@@ -80,7 +80,7 @@ def source_for(c: dict, config: str, run: dict, layout: SweepLayout | None):
         from palpation.mapping.rescore import score_dense
 
         dense = score_dense(Path(run["dir"]) / "checkpoint.pt", c["sim"]["slide_manifest"], "all",
-                            c["sim"]["batch_size"], c["device"])
+                            c["sim"]["batch_size"], c["device"], progress=bool(c["progress"]))
         source = sim_source(c["sim"]["slide_manifest"], "all")
         return source, dense["probs"], dense["labels"], (dense["seq"], dense["frame"])
     if c["sim"]["source"] != "test":

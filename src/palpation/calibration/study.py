@@ -21,7 +21,6 @@ from typing import Callable
 
 import numpy as np
 import optuna
-from tqdm.auto import tqdm
 
 from palpation.calibration.config import CalibrationConfig
 from palpation.calibration.objective import PhotoObjective, photo_targets
@@ -29,6 +28,7 @@ from palpation.calibration.params import check_space, warn_inert
 from palpation.calibration.reference import ReferenceObjective, heading_once
 from palpation.calibration.search import TrialResult, completed, make_sampler, open_study, run_search
 from palpation.measured import MeasuredSet
+from palpation.progress import bar
 from palpation.twin.config import TwinConfig
 from palpation.twin.markers import MarkerBinding
 from palpation.twin.mesh import SensorMesh
@@ -116,10 +116,10 @@ def run_study(prep: Prepared, mesh: SensorMesh, binding: MarkerBinding, out_dir:
             out.append(TrialResult(seen[k].value, seen[k].diverged, metrics))
         return out
 
-    with tqdm(total=cfg.n_trials, initial=min(done, cfg.n_trials), desc="calibrate", unit="trial",
-              disable=not progress) as bar:
+    with bar(total=cfg.n_trials, initial=min(done, cfg.n_trials), desc="calibrate", unit="trial",
+             enabled=progress) as trials:
         run_search(study, cfg.space(), cfg.n_trials, cfg.n_startup, cfg.batch_size, timed,
-                   on_trial=on_trial, progress=bar.update)
+                   on_trial=on_trial, progress=trials.update)
     return study
 
 

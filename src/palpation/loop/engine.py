@@ -25,6 +25,7 @@ from palpation.loop.config import LoopConfig
 from palpation.loop.effects import EFFECTS, PARAMS, Dof, bounds, clip, move
 from palpation.loop.inputs import Target
 from palpation.loop.recalibrate import recalibrate
+from palpation.progress import bar
 
 log = logging.getLogger(__name__)
 # warm starts along the attribution's estimate: the signature is a secant at the nominal step, so a
@@ -171,17 +172,19 @@ def trust_region(p: Problem, names, factor: float, overrides: Mapping | None = N
 
 
 def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path, twin_key: str,
-               max_rounds: int, on_round=None) -> None:
+               max_rounds: int, on_round=None, progress: bool = False) -> None:
     """Advance every problem until its loop stops; each attempt's record lands in problem.rounds.
 
     Within a round, the effects the BIC keeps are tried in ranking order (at most cfg.tries_per_round):
     the first whose recalibrated twin lowers the held-out MAE is kept; if none does, the loop stops.
+    `progress`: a tqdm bar over the rounds, and one per recalibration over its trials.
     """
     steps = dict(cfg.steps)
-    for k in range(1, max_rounds + 1):
+    rounds = bar(range(1, max_rounds + 1), desc="loop rounds", unit="round", enabled=progress)
+    for k in rounds:
         active = [p for p in problems if not p.done and p.candidates]
         if not active:
-            return
+            break  # every loop has stopped (the bar ends short of max_rounds)
         evaluate([p for p in active if p.markers is None], simulate)  # else still current from last round
         for p in active:
             p.refit = refit_dofs(p)
@@ -212,7 +215,8 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                 estimates = linear_estimate(p, effect, before[p.name][5], sig, refits[p.name], steps,
                                             cfg.search.bounds)
                 warm[p.name] = [dict(before[p.name][1]), *estimates]
-            fits = recalibrate(trying, simulate, cfg.search, db_path, f"r{k}t{attempt}", twin_key, warm)
+            fits = recalibrate(trying, simulate, cfg.search, db_path, f"r{k}t{attempt}", twin_key, warm,
+                               progress=progress)
             for p in trying:
                 p.params.update(fits[p.name]["params"])
             evaluate(trying, simulate)
@@ -238,6 +242,8 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                 p.done = True  # every try of this round was rejected
         if on_round is not None:
             on_round(k, problems)
+        rounds.set_postfix_str(f"{sum(not p.done for p in problems)} of {len(problems)} going", refresh=False)
+    rounds.close()
 
 
 def _record(k: int, p: Problem, effect, att, before, after, accepted: bool) -> dict:

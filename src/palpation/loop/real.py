@@ -45,14 +45,15 @@ def make_problem(mset: MeasuredSet, source: str, cfg: LoopConfig, base: Mapping[
                    searched=searched, effects=list(effects_on), candidates=cands)
 
 
-def round_zero(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path, tkey: str) -> None:
+def round_zero(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path, tkey: str,
+               progress: bool = False) -> None:
     """Fit `round0_params` (the calibrated twin before any effect) and record round 0."""
     if cfg.calibrate_round0:
         searched = {p.name: p.searched for p in problems}
         for p in problems:
             p.searched = list(cfg.round0_params)
         fits = recalibrate(problems, simulate, cfg.search, db_path, "r0", tkey,
-                           {p.name: [dict(p.params)] for p in problems})
+                           {p.name: [dict(p.params)] for p in problems}, progress=progress)
         for p in problems:
             p.params.update(fits[p.name]["params"])
             p.searched = searched[p.name]
@@ -65,14 +66,15 @@ def round_zero(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
 
 
 def run_loop(mset: MeasuredSet, source: str, cfg: LoopConfig, simulate, base: Mapping[str, float],
-             db_path: Path, tkey: str, on_round=None) -> Problem:
-    """Round 0, then up to cfg.max_rounds effects; returns the problem with its round records."""
+             db_path: Path, tkey: str, on_round=None, progress: bool = False) -> Problem:
+    """Round 0, then up to cfg.max_rounds effects; returns the problem with its round records.
+    `progress`: tqdm bars over the rounds and each recalibration's trials."""
     cfg.validate()
     p = make_problem(mset, source, cfg, base)
     log.info("loop on %s: fit %s, held out %s, candidates %s", source, [t.name for t in p.targets if t.fit],
              [t.name for t in p.targets if not t.fit], p.candidates)
-    round_zero([p], simulate, cfg, db_path, tkey)
+    round_zero([p], simulate, cfg, db_path, tkey, progress)
     if on_round is not None:
         on_round(0, [p])
-    run_rounds([p], simulate, cfg, db_path, tkey, cfg.max_rounds, on_round)
+    run_rounds([p], simulate, cfg, db_path, tkey, cfg.max_rounds, on_round, progress)
     return p

@@ -24,6 +24,7 @@ from palpation.calibration.objective import marker_mae_px
 from palpation.calibration.search import ParamSpec, completed, make_sampler, open_study, validate_space
 from palpation.loop.config import SearchSettings
 from palpation.loop.effects import PARAMS, bounds, clip
+from palpation.progress import bar
 
 log = logging.getLogger(__name__)
 
@@ -50,11 +51,13 @@ def study_name(key: str, tag: str, space: list[ParamSpec], fixed: Mapping[str, f
 
 
 def recalibrate(problems: list, simulate: Simulate, settings: SearchSettings, db_path: Path, tag: str,
-                twin_key: str, warm: Mapping[str, list[dict]] | None = None) -> dict[str, dict]:
+                twin_key: str, warm: Mapping[str, list[dict]] | None = None,
+                progress: bool = False) -> dict[str, dict]:
     """Search each problem's `searched` names; returns {problem name: {best params, value, trial, study}}.
 
     `problems` carry .name, .key, .params (all values), .searched, .fit_targets(); `warm` maps a
-    problem name to proposals to enqueue (clipped into the bounds) when its study is new.
+    problem name to proposals to enqueue (clipped into the bounds) when its study is new. `progress`:
+    a tqdm bar over the completed trials of all studies (resumed ones count from where they stand).
     """
     runs = []
     for p in problems:
@@ -68,6 +71,9 @@ def recalibrate(problems: list, simulate: Simulate, settings: SearchSettings, db
             for w in (warm or {}).get(p.name, []):
                 study.enqueue_trial(clip({k: w[k] for k in p.searched}, limits), skip_if_exists=True)
         runs.append({"p": p, "space": space, "study": study, "seen": {}})
+    done0 = sum(min(completed(r["study"]), settings.n_trials) for r in runs)
+    trials = bar(total=settings.n_trials * len(runs), initial=done0, desc=f"recalibrate {tag}", unit="trial",
+                 enabled=progress, leave=False)
     while True:
         asks = []
         for run in runs:
@@ -102,6 +108,8 @@ def recalibrate(problems: list, simulate: Simulate, settings: SearchSettings, db
             for k, v in attrs.items():
                 trial.set_user_attr(k, v)
             run["study"].tell(trial, value)
+        trials.update(len(asks))
+    trials.close()
     out = {}
     for run in runs:
         best = best_trial(run["study"])

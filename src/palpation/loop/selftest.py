@@ -95,8 +95,11 @@ def make_sets(injections: list[Injection], states: list[Target], simulate, noise
 
 def run_selftest(cfg: LoopConfig, simulate, base: Mapping[str, float], template: list[Target],
                  geometry: Mapping[str, MeasuredState], rest_px: np.ndarray, out_dir: Path, db_path: Path,
-                 tkey: str) -> tuple[list[dict], list[Problem], list[Injection]]:
-    """Make the sets, run the loop on each (it only reads the files), and score what it names."""
+                 tkey: str, progress: bool = False) -> tuple[list[dict], list[Problem], list[Injection]]:
+    """Make the sets, run the loop on each (it only reads the files), and score what it names.
+
+    The runs advance in lockstep: `progress` shows their rounds and, per recalibration, the trials of
+    all runs together."""
     cfg.validate()
     rng = np.random.default_rng(cfg.selftest.seed)
     injections = draw_injections(cfg, base, rng)
@@ -112,7 +115,7 @@ def run_selftest(cfg: LoopConfig, simulate, base: Mapping[str, float], template:
         problems.append(p)
     evaluate(problems, simulate)
     before = [p.summary() for p in problems]
-    run_rounds(problems, simulate, cfg, db_path, tkey, cfg.selftest.max_rounds)
+    run_rounds(problems, simulate, cfg, db_path, tkey, cfg.selftest.max_rounds, progress=progress)
     rows = []
     for inj, p, b in zip(injections, problems, before):
         added = [r["effect"] for r in p.rounds if r["accepted"] and r["effect"]]

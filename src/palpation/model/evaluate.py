@@ -10,6 +10,7 @@ from palpation.graph.clips import ClipSet
 from palpation.graph.edges import ClipTopology
 from palpation.graph.normalise import NormStats
 from palpation.markers.lattice import N_MARKERS
+from palpation.progress import bar
 
 
 def central_slice(clip_len: int) -> slice:
@@ -21,13 +22,15 @@ def central_slice(clip_len: int) -> slice:
 @torch.no_grad()
 def predict(model: torch.nn.Module, clips: ClipSet, stats: NormStats, rest: np.ndarray,
             topo: ClipTopology, batch_size: int, max_batches: int | None = None,
-            device: str = "cpu") -> tuple[np.ndarray, np.ndarray]:
-    """Central-frame (probs float32, labels int8), pooled in clip order; no augmentation."""
+            device: str = "cpu", progress: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Central-frame (probs float32, labels int8), pooled in clip order; no augmentation.
+
+    `progress`: a tqdm bar over the batches (test scoring; the per-epoch validation leaves it off)."""
     model.eval()
     n = len(clips) if max_batches is None else min(len(clips), max_batches * batch_size)
     probs, labels = [], []
     centre = central_slice(topo.clip_len)
-    for start in range(0, n, batch_size):
+    for start in bar(range(0, n, batch_size), desc="score", unit="batch", enabled=progress):
         idx = np.arange(start, min(start + batch_size, n))
         markers, lab = clips.gather(idx)
         batch = make_batch(markers, lab, rest, topo, stats, device)

@@ -54,8 +54,10 @@ def device_name(device: str) -> str:
 
 
 def run_job(job: TrainJob, out_dir: str | Path, params: dict | None = None, track: bool = True,
-            tags: dict | None = None) -> dict:
-    """Train, score and write outputs; returns the metrics dict also saved as metrics.json."""
+            tags: dict | None = None, progress: bool = False) -> dict:
+    """Train, score and write outputs; returns the metrics dict also saved as metrics.json.
+
+    `progress`: tqdm bars over the training batches and the test scoring."""
     out_dir = Path(out_dir)
     rest = rest_layout(job.rest)
     topo = clip_topology(spatial_edges(rest), job.clip_len)
@@ -70,10 +72,10 @@ def run_job(job: TrainJob, out_dir: str | Path, params: dict | None = None, trac
     ctx = tracking.start_run("train", params or asdict(job), run_name, run_tags) if track else nullcontext()
     with ctx:
         result = fit(train, val, rest, topo, job.model, job.train, job.seed,
-                     tracking.log_metrics if track else None)
+                     tracking.log_metrics if track else None, progress=progress)
         t0 = time.perf_counter()
         probs, labels = predict(result.model, test, result.stats, rest, topo, job.train.batch_size,
-                                device=job.train.device)
+                                device=job.train.device, progress=progress)
         test_seconds = time.perf_counter() - t0
         test_metrics = marker_metrics(probs, labels, job.train.threshold)
         metrics = {

@@ -28,6 +28,7 @@ from palpation.metrics.classification import confusion, iou
 from palpation.model.config import ModelConfig, TrainConfig
 from palpation.model.evaluate import predict
 from palpation.model.stgnn import STGNN
+from palpation.progress import bar
 
 log = logging.getLogger(__name__)
 NORM_CHUNK = 64  # clips per feature chunk when accumulating `full` statistics
@@ -95,8 +96,11 @@ class FitResult:
 
 
 def fit(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology, model_cfg: ModelConfig,
-        cfg: TrainConfig, seed: int, log_metrics: Callable[[dict, int], None] | None = None) -> FitResult:
-    """Train from scratch and return the model reloaded at its best validation FG IoU (top-1)."""
+        cfg: TrainConfig, seed: int, log_metrics: Callable[[dict, int], None] | None = None,
+        progress: bool = False) -> FitResult:
+    """Train from scratch and return the model reloaded at its best validation FG IoU (top-1).
+
+    `progress`: one tqdm bar over epochs x batches, the epoch's running mean loss in its postfix."""
     seed_everything(seed)
     rng = np.random.default_rng(seed)
     start = time.perf_counter()
@@ -109,6 +113,7 @@ def fit(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology, mode
     if cfg.train_batches:
         n_batches = min(n_batches, cfg.train_batches)
     best, best_state, best_epoch, history, step = -1.0, None, -1, [], 0
+    steps = bar(total=cfg.epochs * n_batches, desc="train", unit="batch", enabled=progress)
     for epoch in range(cfg.epochs):
         model.train()
         order = rng.permutation(len(train))  # without replacement within an epoch
@@ -125,6 +130,9 @@ def fit(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology, mode
             step += 1
             if log_metrics:
                 log_metrics({"train/loss": losses[-1]}, step)
+            if progress:  # refresh=False: redraw only at update()'s mininterval (keeps logs small)
+                steps.set_postfix_str(f"epoch {epoch + 1}/{cfg.epochs} loss {np.mean(losses):.5f}", refresh=False)
+            steps.update()
         if sched:
             sched.step()
         probs, labels = predict(model, val, stats, rest, topo, cfg.batch_size, cfg.val_batches, cfg.device)
@@ -139,6 +147,7 @@ def fit(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology, mode
         if score > best:  # strict, as Lightning's ModelCheckpoint in max mode
             best, best_epoch = score, epoch
             best_state = copy.deepcopy(model.state_dict())
+    steps.close()
     model.load_state_dict(best_state)
     model.eval()
     return FitResult(model, stats, best_epoch, best, history, time.perf_counter() - start)

@@ -16,6 +16,8 @@ from typing import Iterable, Iterator
 import cv2
 import numpy as np
 
+from palpation.progress import bar
+
 FRAMES_PER_STATE = 5
 STATE_FRAME_OFFSET = 2  # middle of the 5 identical frames
 VIDEO_SIZE = (1280, 960)  # width, height
@@ -126,11 +128,15 @@ def iter_state_frames(path: str | os.PathLike,
 
 
 def read_states(path: str | os.PathLike, crops: Iterable[str | tuple[int, int, int, int]],
-                states: Iterable[int] | None = None) -> dict[str, list[PanelDots]]:
-    """Dots of each requested panel for each state: {crop name or str(tuple): [PanelDots per state]}."""
+                states: Iterable[int] | None = None, progress: bool = False) -> dict[str, list[PanelDots]]:
+    """Dots of each requested panel for each state: {crop name or str(tuple): [PanelDots per state]}.
+    `progress`: a tqdm bar over the states' frames."""
     crops = list(crops)
     out: dict[str, list[PanelDots]] = {str(c): [] for c in crops}
-    for _, frame in iter_state_frames(path, states):
+    states = None if states is None else [int(s) for s in states]  # counted below, so not a one-shot iterator
+    total = (count_states(path) if states is None else len(set(states))) if progress else None
+    for _, frame in bar(iter_state_frames(path, states), total=total, desc="panels", unit="frame",
+                        enabled=progress):
         for c in crops:
             out[str(c)].append(read_panel(frame, c))
     return out

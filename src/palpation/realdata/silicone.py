@@ -23,6 +23,7 @@ from palpation.markers.order import similarity_prealign
 from palpation.markers.template import rest_template
 from palpation.markers.track import track_sequence
 from palpation.paths import VIDEOS
+from palpation.progress import bar
 from palpation.realdata.video import read_states
 
 VIDEO = VIDEOS / "dataset_annotations_silicone.mp4"
@@ -244,8 +245,9 @@ def label_markers(markers_px: np.ndarray, dots_px: np.ndarray, angle_deg: float,
 # ----------------------------------------------------------------------------- the whole set
 def build_silicone_set(path: str | os.PathLike = VIDEO, videos=range(1, N_VIDEOS + 1),
                        n_frames: int = N_FRAMES, p: SiliconeParams = SiliconeParams(),
-                       template: np.ndarray | None = None) -> dict[str, np.ndarray]:
-    """Markers, provenance, dots and labels of the selected videos (1-based), first `n_frames` each."""
+                       template: np.ndarray | None = None, progress: bool = False) -> dict[str, np.ndarray]:
+    """Markers, provenance, dots and labels of the selected videos (1-based), first `n_frames` each.
+    `progress`: a tqdm bar over the frames, advanced one video at a time (they are tracked per video)."""
     videos = list(videos)
     template = rest_template() if template is None else np.asarray(template, float)
     states = [state_index(v, f) for v in videos for f in range(1, n_frames + 1)]
@@ -267,8 +269,10 @@ def build_silicone_set(path: str | os.PathLike = VIDEO, videos=range(1, N_VIDEOS
            "videos": np.array(videos, np.int16),
            "states": np.array(states, np.int16).reshape(shape),
            "frame_index": (5 * np.array(states, np.int32) + 4).reshape(shape)}
+    frames_bar = bar(total=len(states), desc="silicone", unit="frame", enabled=progress)
     for k, v in enumerate(videos):
         res = track_video(frames[k * n_frames:(k + 1) * n_frames], template, p)
+        frames_bar.update(n_frames)
         out["markers"][k], out["found"][k] = res["positions"], res["found"]
         out["source"][k], out["similarity_scale"][k] = res["source"], res["scale"]
         for t, (d, c) in enumerate(zip(res["dots"], res["colours"])):
@@ -280,6 +284,7 @@ def build_silicone_set(path: str | os.PathLike = VIDEO, videos=range(1, N_VIDEOS
             dist = chord_distance(res["positions"][t], d, LINE_ANGLE_DEG[v - 1])
             out["chord_distance_px"][k, t] = dist
             out["labels"][k, t] = (dist < LABEL_RADIUS_PX).astype(np.int8)
+    frames_bar.close()
     return out
 
 

@@ -18,8 +18,8 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 import warp as wp
-from tqdm.auto import tqdm
 
+from palpation.progress import bar
 from palpation.twin.config import TwinConfig
 from palpation.twin.contact import record_contact_flags
 from palpation.twin.markers import (ImageSimilarity, MarkerBinding, MarkerProjector, bind_markers,
@@ -176,7 +176,7 @@ def run_batch(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest],
     # to tell a failure inside an env's own frames from one after it finished) loses nothing
     checks = set(range(READ_FAILED_EVERY - 1, n_frames, READ_FAILED_EVERY)) | set((lengths - 1).tolist())
     checked_to = 0  # frames [0, checked_to) are covered by earlier checks
-    for f in tqdm(range(n_frames), desc=f"twin x{n}", unit="frame", disable=not progress, leave=False):
+    for f in bar(range(n_frames), desc=f"twin x{n}", unit="frame", enabled=progress, leave=False):
         sim.step_scheduled()  # one graph launch
         if f in checks:
             # blame only envs still inside their own frames since the last check

@@ -17,8 +17,8 @@ from typing import Callable
 
 import numpy as np
 import warp as wp
-from tqdm.auto import tqdm
 
+from palpation.progress import bar
 from palpation.twin.config import TwinConfig
 from palpation.twin.markers import MarkerBinding, bind_markers, project_markers_np
 from palpation.twin.mesh import SensorMesh
@@ -72,7 +72,7 @@ def run_until(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest], sto
                     T_BA=np.full((n, 4, 4), np.nan), failed=np.zeros(n, bool),
                     stopped_by_rule=np.zeros(n, bool), frames=0, wall_s=0.0)
     active = np.ones(n, bool)
-    for f in tqdm(range(n_frames), desc=f"twin x{n}", unit="frame", disable=not progress, leave=False):
+    for f in bar(range(n_frames), desc=f"twin x{n}", unit="frame", enabled=progress, leave=False):
         sim.step_frame(schedule[f])
         bad = sim.failed() & active
         out.failed |= bad
