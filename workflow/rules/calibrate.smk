@@ -43,7 +43,7 @@ def calibration_outputs(out):
 
 CAL_SHELL = (
     "{PY} palpation.apps.calibrate calibration={params.preset} {params.twin}"
-    " measured={params.measured} mesh={input.mesh} out.dir={params.out} progress=false"
+    " measured={params.measured} mesh={input.mesh} out.dir={params.out}"
     " {params.hydra} > {log} 2>&1"
 )
 

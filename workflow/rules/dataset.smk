@@ -25,7 +25,7 @@ rule simulate_dataset:
     shell:
         "{PY} palpation.apps.simulate set=randomised n_pairs={params.n_pairs} seed={params.seed}"
         " dataset.recentre_k_n={params.recentre}"
-        " {params.twin} {params.fit_args} mesh={input.mesh} out.dir={params.outdir} progress=false"
+        " {params.twin} {params.fit_args} mesh={input.mesh} out.dir={params.outdir}"
         " {params.hydra} > {log} 2>&1"
 
 

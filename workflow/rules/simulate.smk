@@ -24,7 +24,7 @@ rule simulate_canonical:
         "results/logs/twin/simulate_canonical.log",
     shell:
         "{PY} palpation.apps.simulate set=canonical {params.twin} mesh={input.mesh}"
-        " out.dir={params.outdir} progress=false {params.hydra} > {log} 2>&1"
+        " out.dir={params.outdir} {params.hydra} > {log} 2>&1"
 
 
 rule simulate_vessel_slide:
@@ -43,7 +43,7 @@ rule simulate_vessel_slide:
         "results/logs/twin/simulate_vessel_slide.log",
     shell:
         "{PY} palpation.apps.simulate set=vessel_slide {params.twin} mesh={input.mesh}"
-        " out.dir={params.outdir} progress=false {params.hydra} > {log} 2>&1"
+        " out.dir={params.outdir} {params.hydra} > {log} 2>&1"
 
 
 rule render_twin:
