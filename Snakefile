@@ -16,6 +16,7 @@ include: "workflow/rules/loop.smk"
 include: "workflow/rules/dataset.smk"
 include: "workflow/rules/train.smk"
 include: "workflow/rules/maps.smk"
+include: "workflow/rules/results_page.smk"
 
 
 rule all:
@@ -32,6 +33,7 @@ rule all:
         TRAIN_REPORT_FILES,
         TWIN_ABLATION_FILES,
         rules.vessel_maps.output,
+        rules.results_page.output,
 
 
 # The loop's self-test (hidden effects in twin-made sets): snakemake --cores 2 selftest

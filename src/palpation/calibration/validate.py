@@ -19,11 +19,12 @@ import numpy as np
 from palpation.calibration.objective import Simulator, Target, marker_mae_px, target_geometry, undeformed_mae
 from palpation.calibration.params import to_env
 from palpation.camera import MM_PER_PX
+from palpation.report.paper import CALIBRATION_MAE
 
 # SPEC §15.8 (px): the reference twin and its two undeformed baselines
-SPEC_TWIN_PX = {"press": 11.87, "twist_z": 15.82, "twist_x": 14.53, "slide": 12.42}
-SPEC_UNDEFORMED_PX = {"press": 13.95, "twist_z": 15.40, "twist_x": 16.27, "slide": 14.15}
-SPEC_PRESS_D0_PX = {"press": 13.81, "twist_z": 15.29, "twist_x": 16.74, "slide": 14.70}
+SPEC_TWIN_PX = {k: v["twin"] for k, v in CALIBRATION_MAE.items()}
+SPEC_UNDEFORMED_PX = {k: v["undeformed"] for k, v in CALIBRATION_MAE.items()}
+SPEC_PRESS_D0_PX = {k: v["press_d0"] for k, v in CALIBRATION_MAE.items()}
 COLUMNS = ("interaction", "undeformed_px", "paper_params_px", "fitted_px", "fitted_mm", "used_for_fit")
 
 

@@ -7,20 +7,12 @@ import numbers
 
 import pandas as pd
 
+# SPEC §15.6 (exact pixels, best-of-five); the numbers live with the paper's others
+from palpation.report.paper import MAPS_PHOTO_THRESHOLD as PAPER_PHOTO_THRESHOLD
+from palpation.report.paper import TABLE4_MAPS as PAPER
+
 COLUMNS = ("config", "threshold", "threshold_rule", "tp", "fp", "fn", "tn", "mcc", "f1", "precision", "recall",
            "fg_iou", "bg_iou", "ap", "d_bar_mm")
-# SPEC §15.6 (exact pixels, best-of-five model)
-PAPER = {
-    "A-to-A": dict(tp=157, fp=178, fn=41, tn=2726, mcc=0.58, f1=0.59, precision=0.47, recall=0.79, fg_iou=0.42,
-                   bg_iou=0.93, ap=0.71, d_bar_mm=1.05, threshold=0.6283, threshold_rule="precision>=0.9@3mm"),
-    "A-to-B": dict(tp=592, fp=750, fn=752, tn=15906, mcc=0.40, f1=0.44, precision=0.44, recall=0.44, fg_iou=0.28,
-                   bg_iou=0.91, ap=0.42, d_bar_mm=1.21, threshold=0.5739, threshold_rule="precision>=0.9@3mm"),
-    "A-to-C": dict(tp=1359, fp=4843, fn=220, tn=68938, mcc=0.41, f1=0.35, precision=0.22, recall=0.86, fg_iou=0.21,
-                   bg_iou=0.93, ap=0.30, d_bar_mm=5.49, threshold=0.5530, threshold_rule="f1_fallback"),
-    "C-to-B": dict(tp=626, fp=700, fn=718, tn=15956, mcc=0.43, f1=0.47, precision=0.47, recall=0.47, fg_iou=0.31,
-                   bg_iou=0.92, ap=0.45, d_bar_mm=1.31, threshold=0.6129, threshold_rule="precision>=0.9@3mm"),
-}
-PAPER_PHOTO_THRESHOLD = {"A-to-B": 0.5990, "C-to-B": 0.6183}
 
 
 def table_row(config: str, op, stats: dict) -> dict:

@@ -1,4 +1,6 @@
-"""The paper's published numbers (SPEC §15.1, §15.4, §15.5), for side-by-side tables."""
+"""The paper's published numbers (SPEC §6.4, §7, §12, §13, §15), for side-by-side tables.
+
+The one home of every published number the code compares against; other modules import from here."""
 
 from __future__ import annotations
 
@@ -36,3 +38,39 @@ TABLE3 = {
     5: {"fg_iou": (0.2384, 0.0012), "fg_range": (0.2371, 0.2394), "auroc": (0.7818, 0.0018), "ap": (0.3243, 0.0011)},
     7: {"fg_iou": (0.2139, 0.0294), "fg_range": (0.1799, 0.2310), "auroc": (0.7676, 0.0078), "ap": (0.3105, 0.0061)},
 }
+
+# §15.8: calibration MAE in px per interaction: the reference twin, its undeformed rest markers vs the
+# photo, and the press d=0 photo vs the photo; 27.5 px/mm (mm = px × 2/55)
+CALIBRATION_MAE = {
+    "press": {"twin": 11.87, "undeformed": 13.95, "press_d0": 13.81},
+    "twist_z": {"twin": 15.82, "undeformed": 15.40, "press_d0": 15.29},
+    "twist_x": {"twin": 14.53, "undeformed": 16.27, "press_d0": 16.74},
+    "slide": {"twin": 12.42, "undeformed": 14.15, "press_d0": 14.70},
+}
+CALIBRATION_MEAN = {"twin": 13.66, "undeformed": 14.94, "press_d0": 15.14}  # §15.8 bold row
+CALIBRATION_OPTIMUM_PX = 12.43  # §6.4: MAE_absent of the best trial
+
+# §15.6: Table 4 lower half, map per pixel (exact pixels) at the operating point of §12
+TABLE4_MAPS = {
+    "A-to-A": dict(tp=157, fp=178, fn=41, tn=2726, mcc=0.58, f1=0.59, precision=0.47, recall=0.79, fg_iou=0.42,
+                   bg_iou=0.93, ap=0.71, d_bar_mm=1.05, threshold=0.6283, threshold_rule="precision>=0.9@3mm"),
+    "A-to-B": dict(tp=592, fp=750, fn=752, tn=15906, mcc=0.40, f1=0.44, precision=0.44, recall=0.44, fg_iou=0.28,
+                   bg_iou=0.91, ap=0.42, d_bar_mm=1.21, threshold=0.5739, threshold_rule="precision>=0.9@3mm"),
+    "A-to-C": dict(tp=1359, fp=4843, fn=220, tn=68938, mcc=0.41, f1=0.35, precision=0.22, recall=0.86, fg_iou=0.21,
+                   bg_iou=0.93, ap=0.30, d_bar_mm=5.49, threshold=0.5530, threshold_rule="f1_fallback"),
+    "C-to-B": dict(tp=626, fp=700, fn=718, tn=15956, mcc=0.43, f1=0.47, precision=0.47, recall=0.47, fg_iou=0.31,
+                   bg_iou=0.92, ap=0.45, d_bar_mm=1.31, threshold=0.6129, threshold_rule="precision>=0.9@3mm"),
+}
+MAPS_PHOTO_THRESHOLD = {"A-to-B": 0.5990, "C-to-B": 0.6183}  # §15.6, Silicone against the photo truth
+MAPS_VIDEO_PHOTO_IOU = 0.2934  # §12: video-truth vs photo-truth IoU of the Silicone map
+
+# Real sets as the reference counts them: trials, clip-centre frames (viewer states) and the central-frame
+# positive rate (§13.4: 160 Silicone states; §13.5: 219 Meat states, 1,727/15,240 and 1,810/27,813 nodes;
+# §7: Sim 4.2 % on the A-to-A test split)
+DATASETS = {
+    "silicone": {"trials": 10, "frames": 160, "positive_rate": 0.1133},
+    "meat": {"trials": 10, "frames": 219, "positive_rate": 0.0651},
+    "sim": {"trials": 500, "positive_rate": 0.042},
+}
+# §15.3: central-frame nodes and positives of each configuration's test set
+TEST_SETS = {"A-to-A": (85725, 3607), "A-to-B": (15240, 1727), "A-to-C": (27813, 1810), "C-to-B": (15240, 1727)}

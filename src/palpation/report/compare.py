@@ -1,0 +1,180 @@
+"""Reading the workflow's tables for the results page, and comparing our numbers with the paper's.
+
+Every table is checked when it is read: a missing required column raises one ValueError naming the
+file, the column and the rule that writes it, so a stale or hand-edited table fails with a message
+instead of a KeyError deep in the page builder. A table that is absent is simply `None` (that profile
+did not produce it); the page then says so.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import NamedTuple
+
+import pandas as pd
+
+
+class Source(NamedTuple):
+    path: str  # relative to the results root
+    columns: tuple[str, ...]  # columns the page reads
+    rule: str  # the rule that writes it, for messages
+
+
+SOURCES = {
+    "data": Source("data/summary.csv", ("dataset", "trials", "frames", "positive_rate"), "data_summary"),
+    "calibration": Source("calibration/calibration.csv", ("interaction", "undeformed_px", "fitted_px", "fitted_mm"),
+                          "calibrate"),
+    "loop": Source("loop/loop_real.csv", ("round", "effect_added", "mae_fit_px", "mae_heldout_px", "mae_mean_mm"),
+                   "loop"),
+    "seed_sweep": Source("train/report/seed_sweep.csv", ("config", "seed", "auroc", "ap", "fg_iou", "bg_iou",
+                                                         "chance"), "train_report"),
+    "table3": Source("train/report/clip_len_ablation.csv", ("clip_len", "seed", "fg_iou", "ap"), "train_report"),
+    "table4_markers": Source("train/report/table4_markers.csv", ("config", "seed", "tp", "fp", "fn", "tn", "mcc",
+                                                                 "f1", "precision", "recall", "fg_iou", "bg_iou",
+                                                                 "ap"), "train_report"),
+    "table4_maps": Source("maps/table4_maps.csv", ("config", "threshold", "threshold_rule", "tp", "fp", "fn", "tn",
+                                                   "mcc", "f1", "precision", "recall", "fg_iou", "bg_iou", "ap",
+                                                   "d_bar_mm"), "vessel_maps"),
+    "maps_photo": Source("maps/table4_maps_photo.csv", ("config", "threshold", "threshold_rule", "tp", "fp", "fn",
+                                                        "tn", "precision", "recall", "d_bar_mm"), "vessel_maps"),
+    "twin_ablation": Source("train/report/twin_ablation.csv",
+                            ("dataset_twin", "experiment", "n_seeds", "auroc_mean", "auroc_std", "ap_mean", "ap_std",
+                             "fg_iou_mean", "bg_iou_mean"), "of the twin ablation (TWIN_ABLATION_FILES)"),
+}
+
+TITLES = {
+    "data": "Data sets",
+    "calibration": "Calibration (Fig. 4, MAE table)",
+    "loop": "Residual loop (beyond the paper)",
+    "seed_sweep": "Seed sweep (Fig. 6 numbers)",
+    "table3": "Table 3: clip length",
+    "table4_markers": "Table 4, upper half: per marker",
+    "table4_maps": "Table 4, lower half: vessel maps",
+    "twin_ablation": "Twin ablation: which twin made the Sim set",
+}
+
+
+def read_table(root: str | Path, key: str) -> pd.DataFrame | None:
+    """The table `key` of SOURCES under `root`, or None if the run did not produce it."""
+    src = SOURCES[key]
+    path = Path(root) / src.path
+    if not path.exists():
+        return None
+    try:
+        df = pd.read_csv(path)
+    except (pd.errors.EmptyDataError, pd.errors.ParserError) as exc:
+        raise ValueError(f"{path}: not a readable CSV ({exc}); rerun rule {src.rule}") from exc
+    missing = [c for c in src.columns if c not in df.columns]
+    if missing:
+        raise ValueError(f"{path}: missing column(s) {missing} (the page needs {list(src.columns)}, the file has "
+                         f"{list(df.columns)}); rerun rule {src.rule} with the current code")
+    if df.empty:
+        raise ValueError(f"{path}: has a header but no rows; rerun rule {src.rule}")
+    return df
+
+
+def read_json(path: str | Path):
+    """A JSON file's content, or None if it does not exist."""
+    path = Path(path)
+    if not path.exists():
+        return None
+    try:
+        return json.loads(path.read_text())
+    except ValueError as exc:
+        raise ValueError(f"{path}: not valid JSON ({exc})") from exc
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """ours − paper, and the same difference in units of the combined seed std."""
+
+    diff: float
+    sigma: float  # sqrt(std_ours² + std_paper²); NaN if either is unknown
+    k: float = 2.0  # "within seed noise" means |diff| <= k·sigma
+
+    @property
+    def z(self) -> float:
+        return abs(self.diff) / self.sigma if self.sigma > 0 else math.nan
+
+    @property
+    def within(self) -> bool | None:
+        """None where no noise scale exists (one seed, or a single instance)."""
+        if math.isnan(self.sigma):
+            return None
+        return abs(self.diff) <= self.k * self.sigma
+
+    def verdict(self) -> str:
+        if self.within is None:
+            return "no seed spread to judge by"
+        side = "higher" if self.diff > 0 else "lower"
+        if self.sigma == 0:
+            return "equal" if self.diff == 0 else f"{side}; both spreads zero"
+        if self.within:
+            return f"within seed noise ({self.z:.1f}σ)"
+        return f"**{self.z:.1f}σ {side}**"
+
+
+def compare(ours: float, ours_std: float, paper: float, paper_std: float, k: float = 2.0) -> Comparison:
+    sigma = math.hypot(ours_std, paper_std) if not (math.isnan(ours_std) or math.isnan(paper_std)) else math.nan
+    return Comparison(float(ours) - float(paper), sigma, k)
+
+
+def seed_stats(values) -> tuple[float, float, int]:
+    """mean, sample std (ddof 1; NaN for one seed) and n."""
+    v = pd.Series(values, dtype="float64")
+    return float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else math.nan, len(v)
+
+
+def num(v, digits: int = 4) -> str:
+    """A number at `digits` d.p.; integers with thousands separators; '–' for missing."""
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "–"
+    if isinstance(v, str):
+        return v
+    if float(v).is_integer() and digits == 0:
+        return f"{int(v):,}"
+    return f"{float(v):.{digits}f}"
+
+
+def signed(v, digits: int = 4) -> str:
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "–"
+    if digits == 0:
+        return f"{int(round(v)):+,}"
+    return f"{float(v):+.{digits}f}"
+
+
+def pm(mean: float, std: float, digits: int = 4) -> str:
+    return num(mean, digits) if (std is None or math.isnan(std) or std == 0) else \
+        f"{mean:.{digits}f} ± {std:.{digits}f}"
+
+
+def markdown(header: list[str], rows: list[list]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines) + "\n"
+
+
+@dataclass(frozen=True)
+class Gap:
+    """One ours-vs-paper difference, for the explanations' conditions."""
+
+    config: str | None  # configuration, data set or interaction the row is about
+    metric: str
+    diff: float  # ours − paper (or the row's own difference, e.g. loop − calibrated)
+    within: bool | None  # within seed noise; None where no noise scale exists
+
+
+@dataclass
+class Section:
+    """One table of the page: its Markdown, the generated bullets and the differences behind them."""
+
+    key: str  # the table's key in SOURCES and in the explanations file
+    title: str
+    body: str
+    bullets: list[str]
+    gaps: list[Gap]
+    configs: set[str]  # rows present (configurations, data sets, interactions)

@@ -1,0 +1,232 @@
+"""The results page (issue 8): every table of a workflow run beside the paper's numbers, and where and
+why they differ.
+
+`build_page(root)` reads a run's outputs under a results root (read only) and returns one Markdown page;
+`write_page` writes it atomically. Rule `results_page` makes `results/README.md`; `docs/results.md` is a
+committed copy from a paper-profile run. A section whose inputs the run did not produce says so. Known
+causes of differences live in a data file (conf/results_page/explanations.yaml), shown only when their
+table is on the page and, with `when:`, only when the numbers show the difference they explain.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from palpation.io import save_text
+from palpation.report import page_training as training
+from palpation.report import page_twin as twin
+from palpation.report.compare import SOURCES, TITLES, Section, markdown, read_json, read_table
+
+ORDER = ("data", "calibration", "loop", "seed_sweep", "table3", "table4_markers", "table4_maps", "twin_ablation")
+FIGURES = (  # (caption, path under the results root; a glob lists every match)
+    ("Fig. 4: fitted twin vs the photos", "calibration/fig4.png"),
+    ("Fig. 4 at the paper's parameters", "calibration/fig4_paper.png"),
+    ("Calibration history", "calibration/history.png"),
+    ("Fig. 6: precision–recall curves, mean ± std over seeds", "train/report/fig6_pr_curves.png"),
+    ("Fig. 7: vessel maps (TP green, FP blue, FN red, TN black)", "maps/fig7_confusion_maps.png"),
+    ("Fig. 7: threshold selection", "maps/fig7_threshold_selection.png"),
+    ("Residual loop: MAE per round", "loop/rounds.png"),
+    ("Residual loop: residual modes", "loop/modes.png"),
+    ("Residual loop: residuals per photo", "loop/residuals/*.png"),
+    ("Measured photos: detected markers", "data/photos/markers_overlay.png"),
+    ("Silicone set", "data/silicone/silicone_overview.png"),
+    ("Meat set", "data/meat/meat_overview.png"),
+    ("Twin renders", "twin/render/markers.png"),
+)
+WHEN_KEYS = {"configs", "metrics", "direction", "profiles"}
+DIRECTIONS = {"below": -1, "above": 1, "off": 0}
+
+
+@dataclass(frozen=True)
+class Explanation:
+    text: str
+    when: dict
+
+    def applies(self, section: Section, profile: str) -> bool:
+        w = self.when
+        if "profiles" in w and profile not in w["profiles"]:
+            return False
+        configs = set(w.get("configs") or []) or None
+        if configs is not None and not configs & section.configs:
+            return False
+        if "metrics" not in w:
+            return True
+        sign = DIRECTIONS[w.get("direction", "off")]
+        # a gap counts if it is off (outside seed noise, or unjudged) in the asked direction
+        return any(g.metric in w["metrics"] and (configs is None or g.config in configs) and g.within is not True
+                   and g.diff != 0 and (sign == 0 or (g.diff > 0) == (sign > 0)) for g in section.gaps)
+
+
+def load_explanations(path: str | Path) -> dict[str, list[Explanation]]:
+    """{table key: [Explanation]}; unknown keys or conditions raise, naming the file (typos would hide text)."""
+    path = Path(path)
+    data = yaml.safe_load(path.read_text()) or {}
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a mapping of table keys to lists of {{text, when}} entries")
+    out = {}
+    for key, items in data.items():
+        if key not in TITLES and key != "run":
+            raise ValueError(f"{path}: unknown table key {key!r}; use one of {['run', *TITLES]}")
+        out[key] = []
+        for n, item in enumerate(items or []):
+            item = item if isinstance(item, dict) else {"bad": item}
+            raw = item.get("when")
+            when = raw if isinstance(raw, dict) else ({} if raw is None else {"bad": raw})
+            bad = set(item) - {"text", "when"} or set(when) - WHEN_KEYS
+            if "text" not in item or bad or when.get("direction", "off") not in DIRECTIONS:
+                raise ValueError(f"{path}: {key}[{n}] needs `text` and an optional `when` with keys "
+                                 f"{sorted(WHEN_KEYS)} (direction: {sorted(DIRECTIONS)}); got {item}")
+            out[key].append(Explanation(" ".join(str(item["text"]).split()), when))
+    return out
+
+
+def _records(root: Path) -> list[dict]:
+    path = root / "bench" / "reproduction.json"
+    records = read_json(path) or []
+    if not isinstance(records, list) or any(not isinstance(r, dict) or "profile" not in r for r in records):
+        raise ValueError(f"{path}: expected a list of run records with a 'profile' each "
+                         "(palpation.report.reproduction.record_run writes it)")
+    return records
+
+
+def run_info(root: Path, profile: str | None) -> dict:
+    """Profile, device, commit and timing: the latest reproduction record of the profile, else the tables' labels."""
+    records = _records(root)
+    if profile is None and records:
+        profile = records[-1]["profile"]
+    record = next((r for r in reversed(records) if r["profile"] == profile), None)
+    train = read_json(root / "train" / "report" / "bench_train.json") or {}
+    maps = read_json(root / "maps" / "vessel_maps.json") or {}
+    profile = profile or maps.get("profile") or train.get("profile") or "unknown"
+    device = (record or {}).get("device") or next((r.get("device") for r in train.get("runs", [])), None)
+    return {"profile": profile, "device": device or "not recorded", "record": record}
+
+
+def header(root: Path, info: dict, built_commit: str) -> str:
+    rec = info["record"]
+    rows = [["profile", info["profile"]], ["device", info["device"]]]
+    if rec is not None:
+        rows += [["commit (timing record)", f"`{rec.get('commit', 'unknown')}`"],
+                 ["wall time", f"{rec['wall_s']:.1f} s ({rec['wall_s'] / 60:.1f} min)"]]
+    rows.append(["page built at commit", f"`{built_commit}`"])
+    text = (f"# Results beside the paper: {info['profile']} profile\n\n"
+            "Generated by `python -m palpation.apps.results_page` (Snakemake rule `results_page`) from the "
+            f"outputs under `{root}`; do not edit. Every number of ours is read from those files when the page "
+            "is built; the paper's come from `palpation.report.paper` (SPEC §6, §7, §12, §13, §15). A section "
+            "whose inputs this run did not produce says so.\n\n" + markdown(["run", ""], rows))
+    if rec is None:
+        return text + ("\nNo timing record for this profile (`bench/reproduction.json` is written when a "
+                       "whole Snakemake run finishes).\n")
+    per_rule = sorted(rec.get("per_rule", {}).items(), key=lambda kv: -kv[1])
+    stale = "; here the record's commit differs from the page's." if rec.get("commit") != built_commit else "."
+    text += ("\nSeconds per rule, summed over the rule's jobs (parallel jobs make the sum exceed the wall time). "
+             "`bench/reproduction.json` is written when a run ends, so a page built inside a run shows the "
+             "previous completed run, and it lists only the jobs of that invocation (rules not listed were up to "
+             f"date or not requested){stale}\n\n" + markdown(["rule", "s"], [[k, f"{v:.1f}"] for k, v in per_rule]))
+    return text
+
+
+def sections(root: Path, k: float = 2.0) -> dict[str, Section | None]:
+    """Every table of ORDER as a Section, or None where its main input is missing."""
+    t = {key: read_table(root, key) for key in SOURCES}
+    loop_md = root / "loop" / "report.md"
+    build = {
+        "data": lambda: twin.data_sets(t["data"], t["seed_sweep"], t["table4_markers"]),
+        "calibration": lambda: twin.calibration(t["calibration"]),
+        "loop": lambda: twin.loop(t["loop"], loop_md.read_text() if loop_md.exists() else None),
+        "seed_sweep": lambda: training.seed_sweep(t["seed_sweep"], k),
+        "table3": lambda: training.table3(t["table3"], k),
+        "table4_markers": lambda: training.table4_markers(t["table4_markers"], t["seed_sweep"], k),
+        "table4_maps": lambda: training.table4_maps(t["table4_maps"], t["maps_photo"],
+                                                    read_json(root / "maps" / "silicone_pose_check.json")),
+        "twin_ablation": lambda: training.twin_ablation(t["twin_ablation"], k),
+    }
+    return {key: build[key]() if t[key] is not None else None for key in ORDER}
+
+
+def figures(root: Path, link) -> str:
+    lines = []
+    for caption, pattern in FIGURES:
+        found = sorted(glob.glob(str(root / pattern)))
+        if len(found) == 1 and "*" not in pattern:
+            lines.append(f"* [{caption}]({link(pattern)})")
+        elif found:
+            names = ", ".join(f"[{Path(f).stem}]({link(os.path.relpath(f, root))})" for f in found)
+            lines.append(f"* {caption}: {names}")
+    return "\n".join(lines) + "\n" if lines else "No figures produced by this run.\n"
+
+
+def differences(secs: dict[str, Section | None], explanations: dict[str, list[Explanation]], profile: str,
+                k: float) -> str:
+    text = (f"Generated from the numbers above (within seed noise: |ours − paper| ≤ {k:g}σ, σ = the two seed "
+            "stds combined), then the known causes that apply (`conf/results_page/explanations.yaml`).\n")
+    run_notes = [e.text for e in explanations.get("run", []) if e.applies(Section("run", "", "", [], [], set()),
+                                                                          profile)]
+    if run_notes:
+        text += "\n" + "".join(f"* *This run:* {n}\n" for n in run_notes)
+    for key, sec in secs.items():
+        if sec is None:
+            continue
+        causes = [e.text for e in explanations.get(key, []) if e.applies(sec, profile)]
+        text += f"\n### {sec.title}\n\n" + "".join(f"* {b}\n" for b in sec.bullets)
+        text += "".join(f"* *Known cause:* {c}\n" for c in causes)
+    return text
+
+
+def folders(root: Path, path: str | Path, link) -> str:
+    entries = yaml.safe_load(Path(path).read_text()) or []
+    rows = []
+    for e in entries:
+        missing = [k for k in ("path", "rules", "what") if k not in e]
+        if missing:
+            raise ValueError(f"{path}: entry {e} lacks {missing}")
+        there = "yes" if (root / e["path"]).exists() else "–"
+        rows.append([f"[`{e['path']}`]({link(e['path'])})" if there == "yes" else f"`{e['path']}`",
+                     ", ".join(r if " " in r else f"`{r}`" for r in e["rules"]), e["what"], there])
+    return ("What each folder of the results root holds and which rule makes it. Everything is generated: "
+            "delete anything and `snakemake --cores 2` rebuilds it; committed summaries of finished runs live "
+            "in `docs/results/` and `docs/results.md`.\n\n" + markdown(["folder", "made by", "what", "in this run"],
+                                                                      rows))
+
+
+def build_page(root: str | Path, explanations: str | Path, folders_file: str | Path, profile: str | None = None,
+               page_dir: str | Path | None = None, links: str | None = None, k: float = 2.0,
+               built_commit: str = "unknown") -> tuple[str, dict[str, Section | None]]:
+    """The page's Markdown and its sections. Links are relative to `page_dir` (default: the root), or
+    `links` + the path under the root when given (e.g. a committed page pointing at ../results)."""
+    root = Path(root)
+    if not root.is_dir():
+        raise FileNotFoundError(f"results root {root} is not a folder; run the workflow first or pass root=")
+    base = Path(page_dir) if page_dir is not None else root
+
+    def link(rel: str) -> str:
+        if links is not None:
+            return f"{links.rstrip('/')}/{rel}"
+        return Path(os.path.relpath(root / rel, base)).as_posix()
+
+    info = run_info(root, profile)
+    secs = sections(root, k)
+    expl = load_explanations(explanations)
+    parts = [header(root, info, built_commit)]
+    for key, sec in secs.items():
+        if sec is None:
+            src = SOURCES[key]
+            rule = f"rule `{src.rule}`" if src.rule.isidentifier() else f"the rule {src.rule}"
+            parts.append(f"## {TITLES[key]}\n\n*Not produced by this run*: `{src.path}` is missing ({rule} makes "
+                         "it).\n")
+        else:
+            parts.append(f"## {sec.title}\n\n{sec.body}")
+    parts += ["## Figures\n\n" + figures(root, link),
+              "## Where and why they differ\n\n" + differences(secs, expl, info["profile"], k),
+              "## Folders\n\n" + folders(root, folders_file, link)]
+    return "\n".join(parts), secs
+
+
+def write_page(path: str | Path, text: str) -> Path:
+    save_text(path, text)  # atomic: a killed job never leaves half a page
+    return Path(path)
