@@ -16,7 +16,7 @@ rule results_page:
         maps_photo=rules.vessel_maps.output.photo,
         maps_json=rules.vessel_maps.output.json,
         render=rules.render_twin.output.png,  # listed among the figures
-        twin_ablation=globals().get("TWIN_ABLATION_FILES") or [],
+        twin_ablation=TWIN_ABLATION_FILES,  # train.smk; empty where the profile skips the ablation
         conf="conf/results_page.yaml",
         explanations="conf/results_page/explanations.yaml",
         folders="conf/results_page/folders.yaml",
