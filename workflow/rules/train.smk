@@ -30,6 +30,13 @@ def train_data(wildcards):
     return {name: TRAIN_DATA[name] for name in EXPERIMENTS[wildcards.exp][0]}
 
 
+def train_inputs(wildcards):
+    """The datasets and the conf/ files of this configuration (experiment overlay, model, recipe)."""
+    choices = {"experiment": wildcards.exp, "model": EXPERIMENTS[wildcards.exp][1],
+               "recipe": TRAIN.get("recipe", "reference")}
+    return {**train_data(wildcards), "conf": conf_files("train", choices)}
+
+
 def train_overrides(wildcards):
     """Dataset paths and the profile's size knobs for this configuration's model, as Hydra overrides."""
     data = [f"data.{k}={v}" for k, v in train_data(wildcards).items()]
@@ -65,7 +72,7 @@ TRAIN_REPORT_FILES = [
 
 rule train:
     input:
-        unpack(train_data),
+        unpack(train_inputs),
     output:
         metrics=f"{TRAIN_RUN}/metrics.json",
         scores=f"{TRAIN_RUN}/scores.npz",
@@ -88,7 +95,7 @@ rule train:
     shell:
         # train.threads (paper profile) caps torch's CPU threads so that parallel runs do not oversubscribe
         ("OMP_NUM_THREADS={threads} " if "threads" in TRAIN else "")
-        + "PALPATION_PROFILE={params.profile} SNAKEMAKE_RULE=train {PY} palpation.apps.train"
+        + "PALPATION_PROFILE={params.profile} SNAKEMAKE_RULE={rule} {PY} palpation.apps.train"
         " experiment={wildcards.exp} seed={wildcards.seed} clip_len={wildcards.clip_len}"
         " device={params.device} {params.overrides} {params.hydra} > {log} 2>&1"
 
@@ -97,6 +104,7 @@ rule train_report:
     input:
         metrics=sweep_runs("metrics.json"),
         scores=sweep_runs("scores.npz"),
+        conf=conf_files("report"),
     output:
         TRAIN_REPORT_FILES,
     log:
@@ -114,6 +122,6 @@ rule train_report:
             f" 'ablation.seeds={yaml_list(TRAIN.get('ablation', {}).get('seeds', [0, 1, 2]))}'"
         ),
     shell:
-        "{PY} palpation.apps.report profile={params.profile} runs_root={params.runs_root}"
+        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.report profile={params.profile} runs_root={params.runs_root}"
         " out_dir={params.out_dir} 'experiments={params.experiments}' 'seeds={params.seeds}'"
         " clip_len={params.clip_len} {params.ablation} hydra.run.dir={params.out_dir} > {log} 2>&1"
