@@ -46,6 +46,66 @@ def test_artifacts_go_under_results_not_cwd(results_tmp, tmp_path, monkeypatch):
     assert list((results_tmp / "mlartifacts" / "artefacts").rglob("a.txt"))
 
 
+def _dead_pid() -> int:
+    out = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                         text=True, check=True)
+    return int(out.stdout)
+
+
+def test_process_gone():
+    me = tracking.process_id()
+    host, pid, start = me.split(":")
+    assert not tracking.process_gone(me)
+    assert tracking.process_gone(f"{host}:{_dead_pid()}:{start}")
+    assert tracking.process_gone(f"{host}:{pid}:{int(start) + 1}")  # same pid, another process
+    assert not tracking.process_gone(f"elsewhere:{_dead_pid()}:1")  # another host: unknown, left alone
+
+
+def test_run_of_a_killed_process_is_marked_killed(results_tmp):
+    """A run left RUNNING by a SIGKILLed job is KILLED when the next run of that experiment starts."""
+    code = (
+        "import os, signal\n"
+        "from palpation import tracking\n"
+        "with tracking.start_run('killed', params={'x': 1}, run_name='job'):\n"
+        "    os.kill(os.getpid(), signal.SIGKILL)\n"
+    )
+    assert subprocess.run([sys.executable, "-c", code], timeout=300).returncode == -9
+    import mlflow
+
+    mlflow.set_tracking_uri(tracking.tracking_uri())
+    client = mlflow.MlflowClient()
+    exp = client.get_experiment_by_name("killed").experiment_id
+    # a RUNNING run of a live process (this one) and one of another host stay RUNNING
+    alive = client.create_run(exp, tags={"process": tracking.process_id()}).info.run_id
+    remote = client.create_run(exp, tags={"process": "elsewhere:1:1"}).info.run_id
+    [orphan] = [r for r in client.search_runs([exp]) if r.data.tags.get("mlflow.runName") == "job"]
+    assert orphan.info.status == "RUNNING"
+    with tracking.start_run("killed", params={"x": 1}, run_name="job") as run:
+        pass
+    status = {r.info.run_id: r.info.status for r in client.search_runs([exp])}
+    assert status[orphan.info.run_id] == "KILLED"
+    assert status[alive] == status[remote] == "RUNNING"
+    assert status[run.info.run_id] == "FINISHED"
+    assert "gone" in client.get_run(orphan.info.run_id).data.tags["killed_reason"]
+
+
+def test_rerun_of_a_job_supersedes_its_finished_run(results_tmp, monkeypatch):
+    monkeypatch.setenv("SNAKEMAKE_RULE", "train")
+    ids = []
+    for params in ({"lr": 1}, {"lr": 2}, {"lr": 1}):
+        with tracking.start_run("rerun", params=params, run_name="A-to-B-L5-seed0") as run:
+            ids.append(run.info.run_id)
+    import mlflow
+
+    mlflow.set_tracking_uri(tracking.tracking_uri())
+    tags = {r.info.run_id: r.data.tags for r in mlflow.MlflowClient().search_runs(
+        [mlflow.get_experiment_by_name("rerun").experiment_id])}
+    assert tags[ids[0]]["superseded_by"] == ids[2]  # same rule, name and params: the same job
+    assert "superseded_by" not in tags[ids[1]] and "superseded_by" not in tags[ids[2]]
+    assert tags[ids[0]]["job_key"] == tags[ids[2]]["job_key"] != tags[ids[1]]["job_key"]
+    assert tags[ids[0]]["snakemake_rule"] == "train"
+
+
 def test_git_commit_override(monkeypatch):
     from palpation.tracking import git_commit
 

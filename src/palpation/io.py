@@ -1,7 +1,9 @@
 """Atomic writers: an output either exists complete or not at all.
 
 Every file is written to a temporary sibling and renamed into place, so a killed job never
-leaves a half-written file that Snakemake or a later reader could take for a finished one.
+leaves a half-written file that Snakemake or a later reader could take for a finished one. The
+temporary name carries the writer's host and pid; a writer killed hard (SIGKILL) leaves its temporary
+behind, and the next write of the same path (the rerun of the job) removes it.
 """
 
 from __future__ import annotations
@@ -9,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import socket
 import tempfile
 from pathlib import Path
 from typing import Any, Iterator
@@ -17,6 +20,32 @@ import numpy as np
 
 _UMASK = os.umask(0)
 os.umask(_UMASK)
+_HOST = socket.gethostname().replace(".", "_")
+
+
+def _temp_prefix(path: Path, pid: int | None = None) -> str:
+    return f".{path.name}.{_HOST}.{os.getpid() if pid is None else pid}."
+
+
+def remove_stale_temps(path: str | os.PathLike) -> list[Path]:
+    """Delete temporaries of `path` left by dead writers on this host; returns what was deleted."""
+    path = Path(path)
+    head = f".{path.name}.{_HOST}."
+    removed = []
+    for tmp in path.parent.glob(f".{path.name}.*"):
+        pid = tmp.name[len(head):].split(".")[0] if tmp.name.startswith(head) else ""
+        if not pid.isdigit():
+            continue
+        try:
+            os.kill(int(pid), 0)
+            continue  # alive (or a reused pid): leave it
+        except ProcessLookupError:
+            pass
+        except OSError:  # e.g. another user's process: alive
+            continue
+        tmp.unlink(missing_ok=True)
+        removed.append(tmp)
+    return removed
 
 
 @contextlib.contextmanager
@@ -24,7 +53,8 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
     """Yield a temporary path next to `path`; rename it onto `path` only if the block succeeds."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix or path.suffix)
+    remove_stale_temps(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=_temp_prefix(path), suffix=suffix or path.suffix)
     os.close(fd)
     tmp_path = Path(tmp)
     try:

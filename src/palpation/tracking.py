@@ -4,12 +4,21 @@ The tracking store defaults to SQLite at `results/mlflow.db` and is overridden b
 `MLFLOW_TRACKING_URI`. Creating the SQLite schema is not safe when two Snakemake jobs open a fresh
 store at the same instant, so the first connection (schema creation and migrations) and experiment
 creation run under a file lock next to the database.
+
+A job killed hard (SIGKILL, a lost node) leaves its run RUNNING. Every run records the process that
+owns it (`process` tag: host, pid, start time), and `start_run` marks KILLED any RUNNING run of the same
+experiment whose process on this host is gone. It also tags earlier FINISHED runs of the same job
+(`job_key`: stage, Snakemake rule, run name and params) `superseded_by` the new run, since the new run
+overwrites their outputs; "the current runs" are the FINISHED ones without that tag.
 """
 
 from __future__ import annotations
 
 import contextlib
+import hashlib
+import json
 import os
+import socket
 import subprocess
 from pathlib import Path
 from typing import Any, Iterator, Mapping
@@ -61,6 +70,69 @@ def flatten(cfg: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
     return flat
 
 
+def _start_ticks(pid: int) -> str | None:
+    """Start time of process `pid` in clock ticks (Linux /proc); None if there is no such live process
+    (a zombie, dead but not yet reaped by its parent, counts as gone)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    fields = stat[stat.rindex(")") + 2:].split()  # proc(5): state is field 3, starttime field 22
+    return None if fields[0] in ("Z", "X") else fields[19]
+
+
+def process_id(pid: int | None = None) -> str:
+    """host:pid:start-time; the start time tells a reused pid apart from the process that owned a run."""
+    pid = os.getpid() if pid is None else pid
+    return f"{socket.gethostname()}:{pid}:{_start_ticks(pid) or ''}"
+
+
+def process_gone(ident: str) -> bool:
+    """True only if the process `ident` ran on this host and no longer exists (other hosts: unknown)."""
+    host, _, rest = ident.partition(":")
+    pid, _, start = rest.partition(":")
+    if host != socket.gethostname() or not pid.isdigit():
+        return False
+    if not Path("/proc/self/stat").exists():  # no /proc: the pid alone
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:
+            return True
+        except OSError:
+            return False
+        return False
+    now = _start_ticks(int(pid))
+    return now is None or (bool(start) and now != start)
+
+
+def job_key(stage: str, rule: str, run_name: str | None, params: Mapping[str, Any]) -> str:
+    """What makes two runs the same job: a rerun of it gets the same key."""
+    blob = json.dumps([stage, rule, run_name, params], sort_keys=True, default=str)
+    return hashlib.sha1(blob.encode()).hexdigest()[:16]
+
+
+def close_orphans(client: Any, experiment_id: str, by: str = "") -> list[str]:
+    """Mark KILLED the RUNNING runs of an experiment whose process is gone; returns their ids."""
+    killed = []
+    for run in client.search_runs([experiment_id], filter_string="attributes.status = 'RUNNING'"):
+        owner = run.data.tags.get("process", "")
+        if owner and process_gone(owner):
+            client.set_tag(run.info.run_id, "killed_reason", f"process {owner} gone; found by {by or 'a new run'}")
+            client.set_terminated(run.info.run_id, status="KILLED")
+            killed.append(run.info.run_id)
+    return killed
+
+
+def supersede(client: Any, experiment_id: str, key: str, new_run_id: str) -> list[str]:
+    """Tag the earlier FINISHED runs of job `key` superseded by `new_run_id`; returns their ids."""
+    old = client.search_runs([experiment_id],
+                             filter_string=f"tags.job_key = '{key}' and attributes.status = 'FINISHED'")
+    ids = [r.info.run_id for r in old if r.info.run_id != new_run_id and "superseded_by" not in r.data.tags]
+    for run_id in ids:
+        client.set_tag(run_id, "superseded_by", new_run_id)
+    return ids
+
+
 @contextlib.contextmanager
 def start_run(stage: str, params: Mapping[str, Any] | None = None, run_name: str | None = None,
               tags: Mapping[str, str] | None = None) -> Iterator[Any]:
@@ -70,23 +142,31 @@ def start_run(stage: str, params: Mapping[str, Any] | None = None, run_name: str
     uri = tracking_uri()
     lock = _lock_path(uri)
     lock.parent.mkdir(parents=True, exist_ok=True)
+    flat = {k: str(v)[:500] for k, v in flatten(params or {}).items()}
+    rule = os.environ.get("SNAKEMAKE_RULE", "none")
+    key = job_key(stage, rule, run_name, flat)
     with FileLock(str(lock), timeout=120):
         mlflow.set_tracking_uri(uri)
         if mlflow.get_experiment_by_name(stage) is None:
             # artefacts beside the store, not in ./mlruns of whatever folder the job started in
             mlflow.create_experiment(stage, artifact_location=artifact_root(stage))
-        mlflow.set_experiment(stage)
+        experiment = mlflow.set_experiment(stage)
+        client = mlflow.MlflowClient()
+        close_orphans(client, experiment.experiment_id, by=process_id())
     all_tags = {
         "git_commit": git_commit(),
         "stage": stage,
         "profile": os.environ.get("PALPATION_PROFILE", "adhoc"),
-        "snakemake_rule": os.environ.get("SNAKEMAKE_RULE", "none"),
+        "snakemake_rule": rule,
+        "job_key": key,
+        "process": process_id(),
     }
     all_tags.update(tags or {})
     with mlflow.start_run(run_name=run_name, tags=all_tags) as run:
-        if params:
-            flat = {k: str(v)[:500] for k, v in flatten(params).items()}
+        if flat:
             mlflow.log_params(flat)
+        with FileLock(str(lock), timeout=120):
+            supersede(client, experiment.experiment_id, key, run.info.run_id)
         yield run
 
 

@@ -63,10 +63,58 @@ def test_same_seed_same_trials(tmp_path):
 
 
 def test_resume_after_kill(tmp_path):
+    """A trial asked by a process that died before proposing it is proposed and finished on resume."""
     db = tmp_path / "r.db"
     study = open_study(db, "bowl", make_sampler("gp", 0, 5), "maximize")
-    study.ask()  # a trial left RUNNING, as by a killed process
     run_search(study, SPACE, 3, 5, 1, bowl)
+    study.ask()  # left RUNNING without a proposal, as by a killed process
     resumed = search(db, n_trials=6)
     assert completed(resumed) == 6
-    assert any(t.state.name == "FAIL" for t in resumed.trials)
+    assert [t.state.name for t in resumed.trials] == ["COMPLETE"] * 6
+
+
+KILLED_SEARCH = """
+import os, signal, sys
+from pathlib import Path
+import optuna
+sys.path.insert(0, {tests!r})
+from test_search import SPACE, bowl
+from palpation.calibration.search import make_sampler, open_study, run_search
+calls = []
+def die_on(n):
+    calls.append(1)
+    if len(calls) == n:
+        os.kill(os.getpid(), signal.SIGKILL)
+def evaluate(batch):
+    if {where!r} == "evaluate":
+        die_on(3)  # inside the third batch: its trials asked and proposed, not told
+    return bowl(batch)
+sample = optuna.samplers.GPSampler.sample_relative
+def sample_relative(self, *args):
+    die_on(5)  # while proposing trial 4, the second of the GP batch after a startup batch of 3
+    return sample(self, *args)
+if {where!r} == "propose":
+    optuna.samplers.GPSampler.sample_relative = sample_relative
+run_search(open_study(Path({db!r}), "bowl", make_sampler("gp", 0, 3), "maximize"), SPACE, 8, 3, 2, evaluate)
+"""
+
+
+@pytest.mark.parametrize("where", ["evaluate", "propose"])
+def test_resume_after_sigkill_is_exact(tmp_path, where):
+    """A search killed inside a batch and resumed makes the same trials as one never interrupted."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    whole = open_study(tmp_path / "whole.db", "bowl", make_sampler("gp", 0, 3), "maximize")
+    run_search(whole, SPACE, 8, 3, 2, bowl)
+    db = tmp_path / "killed.db"
+    code = KILLED_SEARCH.format(tests=str(Path(__file__).parent), db=str(db), where=where)
+    assert subprocess.run([sys.executable, "-c", code], timeout=300).returncode == -9
+    killed = open_study(db, "bowl", make_sampler("gp", 0, 3), "maximize")
+    left = [(t.state.name, sorted(t.params)) for t in killed.trials[3:]]
+    assert left == {"evaluate": [("COMPLETE", ["E", "k_n"])] * 2 + [("RUNNING", ["E", "k_n"])] * 2,
+                    "propose": [("RUNNING", ["E", "k_n"]), ("RUNNING", [])]}[where]
+    run_search(killed, SPACE, 8, 3, 2, bowl)
+    assert [(t.number, t.state.name, t.params, t.value) for t in killed.trials] == \
+        [(t.number, t.state.name, t.params, t.value) for t in whole.trials]

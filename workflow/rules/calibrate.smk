@@ -42,7 +42,7 @@ def calibration_outputs(out):
 
 
 CAL_SHELL = (
-    "{PY} palpation.apps.calibrate calibration={params.preset} {params.twin}"
+    "SNAKEMAKE_RULE={rule} {PY} palpation.apps.calibrate calibration={params.preset} {params.twin}"
     " measured={params.measured} mesh={input.mesh} out.dir={params.out}"
     " {params.hydra} > {log} 2>&1"
 )
@@ -52,8 +52,8 @@ rule calibrate:
     input:
         measured=rules.measured_photos.output.npz,
         mesh=CAL_MESH,
-        # quick and paper presets inherit project.yaml; an edited preset reruns the search
-        conf=sorted({"conf/calibrate.yaml", f"conf/calibration/{CAL_PRESET}.yaml", "conf/calibration/project.yaml"}),
+        # the preset and the presets it inherits: an edited one reruns the search
+        conf=conf_files("calibrate", {"calibration": CAL_PRESET, "twin/mesh": config["twin_resolution"]}),
     output:
         **calibration_outputs(CAL_DIR),
     params:
@@ -75,7 +75,7 @@ rule calibrate_reference:
     input:
         measured=rules.measured_photos.output.npz,
         mesh=CAL_MESH,
-        conf=["conf/calibrate.yaml", "conf/calibration/reference.yaml"],
+        conf=conf_files("calibrate", {"calibration": "reference", "twin/mesh": config["twin_resolution"]}),
     output:
         **calibration_outputs(f"{CAL_DIR}/reference"),
     params:

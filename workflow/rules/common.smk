@@ -4,6 +4,8 @@ import sys
 import yaml
 from pathlib import Path
 
+from palpation.confdeps import conf_files
+
 PROFILE = config.get("profile", "quick")
 _profile_file = Path("conf/workflow") / f"{PROFILE}.yaml"
 if not _profile_file.exists():
@@ -22,4 +24,7 @@ def hydra_dir(path):
     return f"hydra.run.dir={Path(path).parent} hydra.output_subdir=.hydra/{Path(path).stem}"
 
 # Every job knows its profile (MLflow tags runs with it) and writes no MLflow artefacts into ./mlruns.
+# The prefix is formatted once, not per job, so each shell command starts with `SNAKEMAKE_RULE={rule}`
+# itself: MLflow tags every run with its rule (palpation.tracking, the job key of a rerun).
+# Hydra rules declare the conf/ files their app composes (conf_files) so that an edit reruns exactly them.
 shell.prefix(f"set -euo pipefail; export PALPATION_PROFILE={PROFILE}; ")

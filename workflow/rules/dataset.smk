@@ -6,7 +6,7 @@ DATASET = config.get("dataset", {})
 rule simulate_dataset:
     input:
         mesh=TWIN_MESH,
-        conf="conf/dataset/sim.yaml",
+        conf=conf_files("simulate", {"twin/mesh": config["twin_resolution"]}),
         fit=LOOP_FIT,  # the residual loop's final twin sets every parameter the draws leave alone
     output:
         manifest="results/sim/dataset/manifest.json",
@@ -23,7 +23,8 @@ rule simulate_dataset:
     log:
         "results/logs/sim/simulate_dataset.log",
     shell:
-        "{PY} palpation.apps.simulate set=randomised n_pairs={params.n_pairs} seed={params.seed}"
+        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.simulate set=randomised"
+        " n_pairs={params.n_pairs} seed={params.seed}"
         " dataset.recentre_k_n={params.recentre}"
         " {params.twin} {params.fit_args} mesh={input.mesh} out.dir={params.outdir}"
         " {params.hydra} > {log} 2>&1"
@@ -34,7 +35,7 @@ rule simulate_dataset:
 use rule simulate_dataset as simulate_dataset_calibrated with:
     input:
         mesh=TWIN_MESH,
-        conf="conf/dataset/sim.yaml",
+        conf=rules.simulate_dataset.input.conf,
         fit=TWIN_FIT,
     output:
         manifest="results/sim/dataset_calibrated/manifest.json",

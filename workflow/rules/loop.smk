@@ -18,11 +18,11 @@ LOOP_TWIN = (
 ).strip()
 LOOP_MESH = f"results/twin/mesh_{config['twin_resolution']}.npz"
 LOOP_GPU = 1 if config["device"] == "cuda" else 0
-LOOP_CONF = sorted({"conf/loop.yaml", f"conf/loop/{LOOP_PRESET}.yaml", "conf/loop/quick.yaml"})
+LOOP_CONF = conf_files("loop", {"loop": LOOP_PRESET, "twin/mesh": config["twin_resolution"]})
 LOOP_FIT = f"{LOOP_DIR}/twin_fit/fitted.yaml"
 LOOP_FIT_ARGS = f"'hydra.searchpath=[file://{LOOP_DIR}]' +twin_fit=fitted"
 LOOP_SHELL = (
-    "{params.py} palpation.apps.loop mode={params.mode} loop={params.preset} {params.twin}"
+    "SNAKEMAKE_RULE={rule} {params.py} palpation.apps.loop mode={params.mode} loop={params.preset} {params.twin}"
     " measured={params.measured} mesh={input.mesh} out.dir={params.out} {params.hydra} > {log} 2>&1"
 )
 

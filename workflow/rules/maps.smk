@@ -24,6 +24,7 @@ def maps_runs(name, configs=MAPS_CONFIGS):
 def maps_inputs(wildcards):
     inputs = {"metrics": maps_runs("metrics.json"), "scores": maps_runs("scores.npz")}
     inputs.update({ds: TRAIN_DATA[ds] for ds in MAPS_DATASETS})
+    inputs["conf"] = conf_files("vessel_maps")
     if "A-to-A" in MAPS_CONFIGS and MAPS_SIM_SOURCE == "slide":
         inputs["checkpoints"] = maps_runs("checkpoint.pt", ["A-to-A"])
         inputs["slide"] = MAPS_SLIDE
@@ -58,7 +59,7 @@ rule vessel_maps:
         profile=PROFILE,
         device=config.get("device", "cpu"),
     shell:
-        "PALPATION_PROFILE={params.profile} SNAKEMAKE_RULE=vessel_maps {PY} palpation.apps.vessel_maps"
+        "PALPATION_PROFILE={params.profile} SNAKEMAKE_RULE={rule} {PY} palpation.apps.vessel_maps"
         " profile={params.profile} 'configs={params.configs}' runs.root={params.runs_root}"
         " 'runs.seeds={params.seeds}' clip_len={params.clip_len} {params.data} {params.sim}"
         " device={params.device} out_dir={params.out_dir} {params.hydra} > {log} 2>&1"

@@ -7,6 +7,7 @@ rule meat_set:
     input:
         video=f"{VIDEOS}/predictions_sim_to_meat.mp4",
         rest_photo=f"{PHOTOS}/sensor_default_state.png",
+        conf=conf_files("meat"),
     output:
         npz="results/data/meat/meat.npz",
         json="results/data/meat/meat.json",
@@ -18,7 +19,7 @@ rule meat_set:
     log:
         "results/logs/data/meat_set.log",
     shell:
-        "{PY} palpation.apps.meat video={input.video} template_photo={input.rest_photo}"
+        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.meat video={input.video} template_photo={input.rest_photo}"
         " out.npz={output.npz} out.json={output.json} out.figure={params.figure}"
         " {params.hydra} > {log} 2>&1"
 
@@ -27,6 +28,7 @@ rule data_summary:
     input:
         silicone="results/data/silicone/silicone.npz",
         meat=rules.meat_set.output.npz,
+        conf=conf_files("data_summary"),
     output:
         csv="results/data/summary.csv",
         md="results/data/summary.md",
@@ -35,6 +37,6 @@ rule data_summary:
     log:
         "results/logs/data/data_summary.log",
     shell:
-        "{PY} palpation.apps.data_summary datasets.silicone.path={input.silicone}"
+        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.data_summary datasets.silicone.path={input.silicone}"
         " datasets.meat.path={input.meat} out.csv={output.csv} out.md={output.md}"
         " {params.hydra} > {log} 2>&1"

@@ -15,7 +15,7 @@ rule measured_photos:
                 "slide_press_depth=3_angle=10_slide_length=50_timestamp=2025-08-30-21-49-26.png",
             ],
         ),
-        config="conf/photos.yaml",
+        conf=conf_files("photos"),
     output:
         npz="results/data/photos/measured_photos.npz",
         json="results/data/photos/measured_photos.json",
@@ -35,5 +35,6 @@ rule measured_photos:
     log:
         "results/logs/data/measured_photos.log",
     shell:
-        "{params.py} palpation.apps.photos photos_dir={params.photos_dir} out.dir={params.outdir}"
+        "SNAKEMAKE_RULE={rule} {params.py} palpation.apps.photos"
+        " photos_dir={params.photos_dir} out.dir={params.outdir}"
         " {params.hydra} > {log} 2>&1"

@@ -17,7 +17,7 @@ rule results_page:
         maps_json=rules.vessel_maps.output.json,
         render=rules.render_twin.output.png,  # listed among the figures
         twin_ablation=TWIN_ABLATION_FILES,  # train.smk; empty where the profile skips the ablation
-        conf="conf/results_page.yaml",
+        conf=conf_files("results_page"),
         explanations="conf/results_page/explanations.yaml",
         folders="conf/results_page/folders.yaml",
     output:
@@ -29,5 +29,5 @@ rule results_page:
         hydra=lambda wildcards, output: hydra_dir(output.page),
         profile=PROFILE,
     shell:
-        "{PY} palpation.apps.results_page root={params.root} out={output.page} profile={params.profile}"
+        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.results_page root={params.root} out={output.page} profile={params.profile}"
         " explanations={input.explanations} folders={input.folders} {params.hydra} > {log} 2>&1"

@@ -7,7 +7,7 @@ rule silicone_set:
     input:
         video=f"{VIDEOS}/dataset_annotations_silicone.mp4",
         rest_photo=f"{PHOTOS}/sensor_default_state.png",
-        config="conf/silicone.yaml",
+        conf=conf_files("silicone"),
     output:
         npz="results/data/silicone/silicone.npz",
         json="results/data/silicone/silicone.json",
@@ -19,7 +19,8 @@ rule silicone_set:
     log:
         "results/logs/data/silicone_set.log",
     shell:
-        "{PY} palpation.apps.silicone task=set video={input.video} template_photo={input.rest_photo}"
+        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.silicone task=set"
+        " video={input.video} template_photo={input.rest_photo}"
         " out.npz={output.npz} out.json={output.json} out.figure={params.figure}"
         " {params.hydra} > {log} 2>&1"
 
@@ -28,7 +29,7 @@ rule silicone_check:
     input:
         npz=rules.silicone_set.output.npz,
         video=f"{VIDEOS}/predictions_sim_to_silicone.mp4",
-        config="conf/silicone.yaml",
+        conf=conf_files("silicone"),
     output:
         json="results/data/silicone/label_agreement.json",
     params:
@@ -36,5 +37,6 @@ rule silicone_check:
     log:
         "results/logs/data/silicone_check.log",
     shell:
-        "{PY} palpation.apps.silicone task=check out.npz={input.npz} prediction_video={input.video}"
+        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.silicone task=check"
+        " out.npz={input.npz} prediction_video={input.video}"
         " out.agreement={output.json} {params.hydra} > {log} 2>&1"

@@ -6,11 +6,14 @@ CANONICAL = ["press", "twist_z", "twist_x", "slide"]
 TWIN_MESH = f"results/twin/mesh_{config['twin_resolution']}.npz"
 TWIN_ARGS = f"twin/mesh={config['twin_resolution']} twin.device={config['device']}"
 GPU = 1 if config["device"] == "cuda" else 0
+# conf/ files of palpation.apps.simulate; the dataset group (draw options) matters to set=randomised only
+SIM_CONF = conf_files("simulate", {"twin/mesh": config["twin_resolution"], "dataset": None})
 
 
 rule simulate_canonical:
     input:
         mesh=TWIN_MESH,
+        conf=SIM_CONF,
     output:
         manifest="results/twin/canonical/manifest.json",
         npz=expand("results/twin/canonical/{kind}.npz", kind=CANONICAL),
@@ -23,13 +26,14 @@ rule simulate_canonical:
     log:
         "results/logs/twin/simulate_canonical.log",
     shell:
-        "{PY} palpation.apps.simulate set=canonical {params.twin} mesh={input.mesh}"
+        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.simulate set=canonical {params.twin} mesh={input.mesh}"
         " out.dir={params.outdir} {params.hydra} > {log} 2>&1"
 
 
 rule simulate_vessel_slide:
     input:
         mesh=TWIN_MESH,
+        conf=SIM_CONF,
     output:
         manifest="results/twin/vessel_slide/manifest.json",
         npz="results/twin/vessel_slide/vessel_slide.npz",
@@ -42,7 +46,7 @@ rule simulate_vessel_slide:
     log:
         "results/logs/twin/simulate_vessel_slide.log",
     shell:
-        "{PY} palpation.apps.simulate set=vessel_slide {params.twin} mesh={input.mesh}"
+        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.simulate set=vessel_slide {params.twin} mesh={input.mesh}"
         " out.dir={params.outdir} {params.hydra} > {log} 2>&1"
 
 
@@ -62,7 +66,8 @@ rule render_twin:
     log:
         "results/logs/twin/render_twin.log",
     shell:
-        "{PY} palpation.twin.render --out {params.outdir} {input.canonical} {input.slide} > {log} 2>&1"
+        "SNAKEMAKE_RULE={rule} {PY} palpation.twin.render --out {params.outdir} {input.canonical} {input.slide}"
+        " > {log} 2>&1"
 
 
 rule bench_twin:

@@ -30,6 +30,13 @@ def train_data(wildcards, sim=TRAIN_DATA["sim"]):
     return {name: sim if name == "sim" else TRAIN_DATA[name] for name in EXPERIMENTS[wildcards.exp][0]}
 
 
+def train_inputs(wildcards, sim=TRAIN_DATA["sim"]):
+    """The datasets and the conf/ files of this configuration (experiment overlay, model, recipe)."""
+    choices = {"experiment": wildcards.exp, "model": EXPERIMENTS[wildcards.exp][1],
+               "recipe": TRAIN.get("recipe", "reference")}
+    return {**train_data(wildcards, sim), "conf": conf_files("train", choices)}
+
+
 def train_overrides(wildcards, sim=TRAIN_DATA["sim"]):
     """Dataset paths and the profile's size knobs for this configuration's model, as Hydra overrides."""
     data = [f"data.{k}={v}" for k, v in train_data(wildcards, sim).items()]
@@ -65,7 +72,7 @@ TRAIN_REPORT_FILES = [
 
 rule train:
     input:
-        unpack(train_data),
+        unpack(train_inputs),
     output:
         metrics=f"{TRAIN_RUN}/metrics.json",
         scores=f"{TRAIN_RUN}/scores.npz",
@@ -97,6 +104,7 @@ rule train_report:
     input:
         metrics=sweep_runs("metrics.json"),
         scores=sweep_runs("scores.npz"),
+        conf=conf_files("report"),
     output:
         TRAIN_REPORT_FILES,
     log:
@@ -114,7 +122,7 @@ rule train_report:
             f" 'ablation.seeds={yaml_list(TRAIN.get('ablation', {}).get('seeds', [0, 1, 2]))}'"
         ),
     shell:
-        "{PY} palpation.apps.report profile={params.profile} runs_root={params.runs_root}"
+        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.report profile={params.profile} runs_root={params.runs_root}"
         " out_dir={params.out_dir} 'experiments={params.experiments}' 'seeds={params.seeds}'"
         " clip_len={params.clip_len} {params.ablation} hydra.run.dir={params.out_dir} > {log} 2>&1"
 
@@ -131,7 +139,7 @@ TWIN_ABLATION_FILES = (
 
 use rule train as train_twin_ablation with:
     input:
-        unpack(lambda wildcards: train_data(wildcards, TWIN_ABL_SIM)),
+        unpack(lambda wildcards: train_inputs(wildcards, TWIN_ABL_SIM)),
     output:
         metrics=f"{TWIN_ABL_RUN}/metrics.json",
         scores=f"{TWIN_ABL_RUN}/scores.npz",
@@ -152,7 +160,7 @@ rule twin_ablation_report:
     input:
         loop=twin_ablation_runs(TRAIN_RUN),
         calibrated=twin_ablation_runs(TWIN_ABL_RUN),
-        conf="conf/twin_ablation.yaml",
+        conf=conf_files("twin_ablation"),
     output:
         TWIN_ABLATION_FILES,
     log:
@@ -163,6 +171,6 @@ rule twin_ablation_report:
         clip_len=TRAIN.get("clip_len", 5),
         profile=PROFILE,
     shell:
-        "{PY} palpation.apps.twin_ablation profile={params.profile} 'experiments={params.experiments}'"
+        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.twin_ablation profile={params.profile} 'experiments={params.experiments}'"
         " 'seeds={params.seeds}' clip_len={params.clip_len} twins.loop={TRAIN_DIR}"
         " twins.calibrated={TRAIN_DIR}/twin_calibrated out_dir={TRAIN_REPORT} > {log} 2>&1"

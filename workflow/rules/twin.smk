@@ -2,6 +2,9 @@
 
 
 rule mesh:
+    input:
+        # the app composes twin=quick too but reads only twin.mesh
+        conf=lambda wildcards: ["conf/mesh.yaml", f"conf/twin/mesh/{wildcards.resolution}.yaml"],
     output:
         mesh="results/twin/mesh_{resolution}.npz",
         stats="results/twin/mesh_{resolution}.json",
@@ -14,5 +17,5 @@ rule mesh:
     log:
         "results/logs/twin/mesh_{resolution}.log",
     shell:
-        "{PY} palpation.apps.mesh twin/mesh={wildcards.resolution}"
+        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.mesh twin/mesh={wildcards.resolution}"
         " out.mesh={output.mesh} out.stats={output.stats} {params.hydra} > {log} 2>&1"

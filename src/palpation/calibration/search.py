@@ -2,14 +2,19 @@
 
 The twin simulates many parameter sets as independent environments of one run, so the search asks
 the sampler for a batch of proposals, simulates them together, and tells the results back. The study
-lives in SQLite: a killed search resumes where it stopped (trials left RUNNING by the dead process are
-marked FAIL and re-proposed).
+lives in SQLite: a killed search resumes where it stopped, and exactly as if it had never stopped.
+After each proposal the sampler (its random state and caches) is pickled into the study, so the trials
+of a killed batch, left RUNNING, are finished first (simulated again with their recorded proposals, or
+proposed now if the kill came while proposing) and every later proposal is the one an uninterrupted
+search would have made.
 """
 
 from __future__ import annotations
 
+import base64
 import logging
 import math
+import pickle
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
@@ -18,6 +23,8 @@ import optuna
 from optuna.trial import TrialState
 
 log = logging.getLogger(__name__)
+SAMPLER_ATTR = "sampler_state"  # study user attrs: the pickled sampler after the last batch's asks
+ASKED_ATTR = "sampler_asked"  # and the number of trials the study held then
 
 
 @dataclass(frozen=True)
@@ -72,10 +79,49 @@ def open_study(db_path: Path, name: str, sampler: optuna.samplers.BaseSampler,
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     study = optuna.create_study(storage=f"sqlite:///{db_path}", study_name=name, sampler=sampler,
                                 direction=direction, load_if_exists=True)
-    for trial in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
-        log.warning("trial %d was left running by a killed search: marking it failed", trial.number)
-        study.tell(trial.number, state=TrialState.FAIL)
+    state = study.user_attrs.get(SAMPLER_ATTR)
+    if state is not None:
+        try:
+            study.sampler = pickle.loads(base64.b64decode(state))
+        except Exception as exc:  # another Optuna version: resume, but not bit-identically
+            log.warning("study '%s': saved sampler state unreadable (%s): a fresh sampler goes on", name, exc)
     return study
+
+
+def _propose(study: optuna.Study, trial: optuna.Trial, space: Sequence[ParamSpec]) -> dict[str, float]:
+    """Suggest every parameter of `trial`, then save the sampler's state in the study (the resume point)."""
+    proposal = {p.name: trial.suggest_float(p.name, p.low, p.high, log=p.log) for p in space}
+    study.set_user_attr(SAMPLER_ATTR, base64.b64encode(pickle.dumps(study.sampler)).decode())
+    study.set_user_attr(ASKED_ATTR, trial.number + 1)
+    return proposal
+
+
+def ask_batch(study: optuna.Study, space: Sequence[ParamSpec], size: int) -> list[tuple[optuna.Trial, dict]]:
+    """`size` new trials with their proposals, each made before the next ask (a GP batch sees its earlier
+    members)."""
+    batch = []
+    for _ in range(size):
+        trial = study.ask()
+        batch.append((trial, _propose(study, trial, space)))
+    return batch
+
+
+def interrupted(study: optuna.Study, space: Sequence[ParamSpec]) -> list[tuple[optuna.Trial, dict]]:
+    """The batch a killed search left RUNNING, to finish: trials with a recorded proposal are simulated
+    again, the one killed while being proposed gets its proposal now from the saved sampler state."""
+    asked = int(study.user_attrs.get(ASKED_ATTR, 0))
+    batch = []
+    for frozen in sorted(study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)), key=lambda t: t.number):
+        trial = optuna.Trial(study, frozen._trial_id)  # the handle study.ask() returned to the dead process
+        if all(p.name in frozen.params for p in space):
+            if frozen.number >= asked:  # killed between its proposal and the save: later proposals may differ
+                log.warning("trial %d: proposed after the saved sampler state; the resume is not exact",
+                            frozen.number)
+            batch.append((trial, {p.name: frozen.params[p.name] for p in space}))
+        else:
+            batch.append((trial, _propose(study, trial, space)))
+        log.info("trial %d was left running by a killed search: finishing it", frozen.number)
+    return batch
 
 
 def completed(study: optuna.Study) -> int:
@@ -89,13 +135,17 @@ def run_search(study: optuna.Study, space: Sequence[ParamSpec], n_trials: int, n
     """Run until the study holds `n_trials` completed trials.
 
     Startup (random) trials are proposed together; after that each batch holds `batch_size`
-    proposals (1 keeps a GP search strictly sequential, as the reference's).
+    proposals (1 keeps a GP search strictly sequential, as the reference's). A batch a killed search
+    left unfinished is simulated first.
     """
-    while (done := completed(study)) < n_trials:
-        size = max(1, min(n_trials - done, (n_startup - done) if done < n_startup else batch_size))
-        trials = [study.ask() for _ in range(size)]
-        proposals = [{p.name: t.suggest_float(p.name, p.low, p.high, log=p.log) for p in space}
-                     for t in trials]
+    while True:
+        batch = interrupted(study, space)
+        if not batch:
+            if (done := completed(study)) >= n_trials:
+                break
+            size = max(1, min(n_trials - done, (n_startup - done) if done < n_startup else batch_size))
+            batch = ask_batch(study, space, size)
+        trials, proposals = [t for t, _ in batch], [p for _, p in batch]
         results = evaluate(proposals)
         for trial, result in zip(trials, results, strict=True):
             trial.set_user_attr("diverged", result.diverged)
@@ -105,5 +155,5 @@ def run_search(study: optuna.Study, space: Sequence[ParamSpec], n_trials: int, n
             if on_trial is not None:
                 on_trial(frozen, result)
         if progress is not None:
-            progress(size)
+            progress(len(batch))
     return study

@@ -21,7 +21,8 @@ import numpy as np
 import optuna
 
 from palpation.calibration.objective import marker_mae_px
-from palpation.calibration.search import ParamSpec, completed, make_sampler, open_study, validate_space
+from palpation.calibration.search import (ParamSpec, ask_batch, completed, interrupted, make_sampler, open_study,
+                                          validate_space)
 from palpation.loop.config import SearchSettings
 from palpation.loop.effects import PARAMS, bounds, clip
 from palpation.progress import bar
@@ -77,14 +78,12 @@ def recalibrate(problems: list, simulate: Simulate, settings: SearchSettings, db
     while True:
         asks = []
         for run in runs:
+            batch = interrupted(run["study"], run["space"])  # a killed run's last batch comes first
             done = completed(run["study"])
-            if done >= settings.n_trials:
-                continue
-            size = (settings.n_startup - done) if done < settings.n_startup else settings.batch_size
-            for _ in range(max(1, min(settings.n_trials - done, size))):
-                trial = run["study"].ask()
-                asks.append((run, trial, {s.name: trial.suggest_float(s.name, s.low, s.high, log=s.log)
-                                          for s in run["space"]}))
+            if not batch and done < settings.n_trials:
+                size = (settings.n_startup - done) if done < settings.n_startup else settings.batch_size
+                batch = ask_batch(run["study"], run["space"], max(1, min(settings.n_trials - done, size)))
+            asks += [(run, trial, props) for trial, props in batch]
         if not asks:
             break
         fresh = [(run, props) for run, _, props in asks if _key(props) not in run["seen"]]

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections import Counter
 from pathlib import Path
 
 from palpation.io import save_json, save_text
@@ -34,6 +35,25 @@ def jobs_since(metadata_dir: Path, since: float) -> dict[int, dict]:
             continue
         jobs[meta.get("job_hash", hash(path.name))] = {"rule": meta["rule"], "s": end - start}
     return jobs
+
+
+def job_stats(log: str) -> Counter:
+    """Jobs per rule from the first "Job stats" table of a Snakemake log (a dry run's or a run's);
+    empty when Snakemake had nothing to do."""
+    lines = log.splitlines()
+    try:
+        start = lines.index("Job stats:") + 3  # header and rule lines follow
+    except ValueError:
+        return Counter()
+    counts: Counter = Counter()
+    for line in lines[start:]:
+        name, _, count = line.rpartition(" ")
+        if name.strip() == "total":
+            if int(count) != sum(counts.values()):
+                raise ValueError(f"job stats: total {count} is not the sum of {dict(counts)}")
+            return counts
+        counts[name.strip()] += int(count)
+    raise ValueError("job stats: no total line")
 
 
 def record_run(profile: str, device: str, workdir: str | Path = ".") -> dict:
