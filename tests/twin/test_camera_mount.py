@@ -1,7 +1,6 @@
 """Camera error, mount offset and marker anchor (residual loop), and the runner honouring them."""
 
 import dataclasses
-import os
 
 import numpy as np
 import pytest
@@ -11,14 +10,8 @@ from palpation.markers.template import rest_template
 from palpation.twin.config import CameraConfig, MarkerConfig, MountConfig, TwinConfig
 from palpation.twin.markers import (ImageSimilarity, bind_markers, bind_markers_through, body_to_camera,
                                     project_markers_np)
-from palpation.twin.mesh import cached_sensor_mesh
 from palpation.twin.runner import EnvRequest, plan_requests, run_batch
 from palpation.twin.trajectory import PHANTOM_TOP_M, mount_offset, plan_trajectory, tip_positions, with_mount
-
-
-@pytest.fixture(scope="module")
-def mesh():
-    return cached_sensor_mesh("coarse", os.environ.get("PALPATION_MESH_CACHE"))
 
 
 def test_similarity_is_a_camera_with_other_intrinsics():

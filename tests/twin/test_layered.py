@@ -1,20 +1,14 @@
 """Layered skin and per-env damping (residual loop): shell weights, kernel equality at ratio 1, stiffening."""
 
 import dataclasses
-import os
 
 import numpy as np
 import pytest
 
 from palpation.twin.config import TwinConfig
-from palpation.twin.mesh import cached_sensor_mesh, shell_weights, skin_depth_m, tet_volumes
+from palpation.twin.mesh import shell_weights, skin_depth_m, tet_volumes
 from palpation.twin.runner import EnvRequest, plan_requests
 from palpation.twin.simulator import BatchedTwin
-
-
-@pytest.fixture(scope="module")
-def mesh():
-    return cached_sensor_mesh("coarse", os.environ.get("PALPATION_MESH_CACHE"))
 
 
 def layered(cfg: TwinConfig, thickness=1.5e-3) -> TwinConfig:

@@ -1,6 +1,5 @@
 """Batched trajectory runs on the coarse mesh: files, manifest, failures, determinism, the app."""
 
-import os
 import json
 from pathlib import Path
 
@@ -8,26 +7,13 @@ import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 
-from palpation.markers.template import rest_template
 from palpation.paths import REPO_ROOT
 from palpation.twin.config import TwinConfig
-from palpation.twin.markers import bind_markers
-from palpation.twin.mesh import cached_sensor_mesh
 from palpation.twin.output import load_trajectory, write_outputs
 from palpation.twin.runner import EnvRequest, run_batch, simulate_states
 from palpation.twin.trajectory import plan_trajectory
 
 ABSURD_E = 1e11  # Pa: far past the explicit step's stability limit, NaN within a few frames
-
-
-@pytest.fixture(scope="module")
-def mesh():
-    return cached_sensor_mesh("coarse", os.environ.get("PALPATION_MESH_CACHE"))
-
-
-@pytest.fixture(scope="module")
-def binding(mesh):
-    return bind_markers(mesh.nodes, mesh.dome_nodes, rest_template())
 
 
 def test_smoke_run_writes_valid_file_and_manifest(tmp_path, mesh, binding):

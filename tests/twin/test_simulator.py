@@ -1,6 +1,5 @@
 """BatchedTwin on the coarse sensor: determinism, env independence, contact flags, divergence, configs."""
 
-import os
 import numpy as np
 import pytest
 import warp as wp
@@ -9,16 +8,10 @@ from omegaconf import OmegaConf
 
 from palpation.paths import REPO_ROOT
 from palpation.twin.config import TwinConfig, from_reference_units
-from palpation.twin.mesh import cached_sensor_mesh
 from palpation.twin.simulator import BatchedTwin
 
 DEVICES = ["cpu"] + (["cuda:0"] if wp.is_cuda_available() else [])
 TOP = 0.015  # phantom top; the vessel axis is 3 mm below it at (x, 0.039), radius 2 mm
-
-
-@pytest.fixture(scope="module")
-def mesh():
-    return cached_sensor_mesh("coarse", os.environ.get("PALPATION_MESH_CACHE"))
 
 
 def dome_down(tip_z, y=0.039):

@@ -1,27 +1,13 @@
 """run_until: per-env stop rules and snapshots agree with run_batch; per-env parameters reach the twin."""
 
-import os
 
 import numpy as np
 import pytest
 
-from palpation.markers.template import rest_template
 from palpation.twin.config import TwinConfig
-from palpation.twin.markers import bind_markers
-from palpation.twin.mesh import cached_sensor_mesh
 from palpation.twin.runner import EnvRequest, run_batch, simulate_states, tip_node_B
 from palpation.twin.snapshot import run_until
 from palpation.twin.trajectory import plan_trajectory
-
-
-@pytest.fixture(scope="module")
-def mesh():
-    return cached_sensor_mesh("coarse", os.environ.get("PALPATION_MESH_CACHE"))
-
-
-@pytest.fixture(scope="module")
-def binding(mesh):
-    return bind_markers(mesh.nodes, mesh.dome_nodes, rest_template())
 
 
 def test_stop_rule_and_last_frame(mesh, binding):

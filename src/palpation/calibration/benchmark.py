@@ -32,6 +32,7 @@ from palpation.markers.template import rest_template
 from palpation.measured import load_measured_set
 from palpation.paths import REPO_ROOT
 from palpation.tracking import git_commit
+from palpation.twin.benchmark import device_name
 from palpation.twin.config import TwinConfig
 from palpation.twin.markers import bind_markers
 from palpation.twin.mesh import SensorMesh
@@ -81,11 +82,6 @@ def bench_objective(kind: str, mesh: SensorMesh, twin: TwinConfig, mset, n_trial
            "max_frames": max_frames, "commit": git_commit()}
     log.info("%s", rec)
     return rec
-
-
-def device_name(device: str) -> str:
-    d = wp.get_device(device)
-    return f"cuda:{d.name}" if d.is_cuda else "cpu"
 
 
 def main(argv: list[str] | None = None) -> list[dict]:

@@ -69,7 +69,7 @@ def bench_point(mesh: SensorMesh, cfg: TwinConfig, n_envs: int, device: str, max
         per_frame = (tk - t1) / (k - 1)
     wall = setup + per_frame * SLIDE_FRAMES
     substeps = cfg.integrator.substeps
-    rec = {"device": _device_name(device), "resolution": mesh.resolution, "n_envs": n_envs,
+    rec = {"device": device_name(device), "resolution": mesh.resolution, "n_envs": n_envs,
            "frames": SLIDE_FRAMES, "substeps_per_s": substeps / per_frame,
            "env_substeps_per_s": n_envs * substeps / per_frame, "wall_s": wall,
            "trajectories_per_hour": n_envs * 3600.0 / wall, "setup_s": setup,
@@ -91,7 +91,7 @@ def bench_point(mesh: SensorMesh, cfg: TwinConfig, n_envs: int, device: str, max
     return rec
 
 
-def _device_name(device: str) -> str:
+def device_name(device: str) -> str:
     d = wp.get_device(device)
     return f"cuda:{d.name}" if d.is_cuda else "cpu"
 
