@@ -9,6 +9,8 @@ behind, and the next write of the same path (the rerun of the job) removes it.
 from __future__ import annotations
 
 import contextlib
+import csv
+import io
 import json
 import os
 import socket
@@ -79,6 +81,21 @@ def save_json(path: str | os.PathLike, obj: Any) -> None:
 def save_text(path: str | os.PathLike, text: str) -> None:
     with atomic_path(path) as tmp:
         tmp.write_text(text)
+
+
+def csv_text(rows: list[dict], columns, digits: int, na_rep: str | None = None) -> str:
+    """CSV of `rows` restricted to `columns`, floats at `digits` decimals; NaN as `na_rep` when given."""
+    def cell(v):
+        if isinstance(v, float) and na_rep is not None and np.isnan(v):
+            return na_rep
+        return f"{v:.{digits}f}" if isinstance(v, float) else v
+
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(columns), extrasaction="ignore", lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: cell(r[k]) for k in columns})
+    return buf.getvalue()
 
 
 def save_figure(fig, path_stem: str | os.PathLike, dpi: int = 150) -> list[Path]:

@@ -10,8 +10,6 @@ It holds the searched values and the values the search held fixed, in the twin's
 
 from __future__ import annotations
 
-import csv
-import io
 from pathlib import Path
 from typing import Mapping
 
@@ -19,7 +17,7 @@ import yaml
 
 from palpation.calibration.params import REGISTRY, twin_overrides
 from palpation.calibration.validate import COLUMNS, Validation
-from palpation.io import save_json, save_text
+from palpation.io import csv_text, save_json, save_text
 
 TWIN_FIT_GROUP = "twin_fit"
 TWIN_FIT_NAME = "fitted"
@@ -52,12 +50,7 @@ def write_fitted(out_dir: str | Path, fitted: Mapping[str, float], fixed: Mappin
 
 
 def table_csv(rows: list[dict]) -> str:
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=COLUMNS, extrasaction="ignore", lineterminator="\n")
-    writer.writeheader()
-    for r in rows:
-        writer.writerow({k: (f"{r[k]:.3f}" if isinstance(r[k], float) else r[k]) for k in COLUMNS})
-    return buf.getvalue()
+    return csv_text(rows, COLUMNS, digits=3)
 
 
 def table_markdown(val: Validation, fitted: Mapping[str, float]) -> str:

@@ -8,8 +8,6 @@ It holds the fitted values and the switches the added effects need (phantom cont
 
 from __future__ import annotations
 
-import csv
-import io
 from pathlib import Path
 from typing import Mapping
 
@@ -18,6 +16,7 @@ import yaml
 
 from palpation.calibration.objective import marker_mae_px
 from palpation.camera import MM_PER_PX
+from palpation.io import csv_text as io_csv_text
 from palpation.io import save_text
 from palpation.loop.effects import EFFECTS, PARAMS, bounds, twin_overrides
 from palpation.loop.engine import Problem
@@ -43,13 +42,7 @@ def real_rows(p: Problem) -> list[dict]:
 
 
 def csv_text(rows: list[dict], columns) -> str:
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(columns), extrasaction="ignore", lineterminator="\n")
-    w.writeheader()
-    for r in rows:
-        w.writerow({k: ("" if isinstance(r[k], float) and np.isnan(r[k]) else
-                        f"{r[k]:.4f}" if isinstance(r[k], float) else r[k]) for k in columns})
-    return buf.getvalue()
+    return io_csv_text(rows, columns, digits=4, na_rep="")
 
 
 def write_twin_fit(out_dir: Path, p: Problem, shell_thickness_m: float, record: Mapping,

@@ -12,8 +12,6 @@ itself a base effect is injected into a twin without it. Every run of a batch ad
 
 from __future__ import annotations
 
-import csv
-import io
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +19,7 @@ from typing import Mapping
 
 import numpy as np
 
+from palpation.io import csv_text
 from palpation.loop.config import LoopConfig
 from palpation.loop.effects import EFFECTS, PARAMS, move
 from palpation.loop.engine import Problem, evaluate, initial_params, run_rounds
@@ -147,9 +146,4 @@ def summary(rows: list[dict]) -> dict:
 
 
 def rows_csv(rows: list[dict]) -> str:
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=COLUMNS, extrasaction="ignore", lineterminator="\n")
-    w.writeheader()
-    for r in rows:
-        w.writerow({k: (f"{r[k]:.4f}" if isinstance(r[k], float) else r[k]) for k in COLUMNS})
-    return buf.getvalue()
+    return csv_text(rows, COLUMNS, digits=4)
