@@ -20,6 +20,8 @@ from typing import Any, Iterator
 
 import numpy as np
 
+from palpation.process import pid_alive
+
 _UMASK = os.umask(0)
 os.umask(_UMASK)
 _HOST = socket.gethostname().replace(".", "_")
@@ -36,15 +38,8 @@ def remove_stale_temps(path: str | os.PathLike) -> list[Path]:
     removed = []
     for tmp in path.parent.glob(f".{path.name}.*"):
         pid = tmp.name[len(head):].split(".")[0] if tmp.name.startswith(head) else ""
-        if not pid.isdigit():
-            continue
-        try:
-            os.kill(int(pid), 0)
-            continue  # alive (or a reused pid): leave it
-        except ProcessLookupError:
-            pass
-        except OSError:  # e.g. another user's process: alive
-            continue
+        if not pid.isdigit() or pid_alive(int(pid)):
+            continue  # not ours, or its writer is alive (or a reused pid): leave it
         tmp.unlink(missing_ok=True)
         removed.append(tmp)
     return removed

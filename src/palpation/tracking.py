@@ -18,7 +18,6 @@ import contextlib
 import hashlib
 import json
 import os
-import socket
 import subprocess
 from pathlib import Path
 from typing import Any, Iterator, Mapping
@@ -26,6 +25,7 @@ from typing import Any, Iterator, Mapping
 from filelock import FileLock
 
 from palpation.paths import REPO_ROOT, results_dir
+from palpation.process import process_gone, process_id
 
 
 def tracking_uri() -> str:
@@ -68,41 +68,6 @@ def flatten(cfg: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
         else:
             flat[name] = value
     return flat
-
-
-def _start_ticks(pid: int) -> str | None:
-    """Start time of process `pid` in clock ticks (Linux /proc); None if there is no such live process
-    (a zombie, dead but not yet reaped by its parent, counts as gone)."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return None
-    fields = stat[stat.rindex(")") + 2:].split()  # proc(5): state is field 3, starttime field 22
-    return None if fields[0] in ("Z", "X") else fields[19]
-
-
-def process_id(pid: int | None = None) -> str:
-    """host:pid:start-time; the start time tells a reused pid apart from the process that owned a run."""
-    pid = os.getpid() if pid is None else pid
-    return f"{socket.gethostname()}:{pid}:{_start_ticks(pid) or ''}"
-
-
-def process_gone(ident: str) -> bool:
-    """True only if the process `ident` ran on this host and no longer exists (other hosts: unknown)."""
-    host, _, rest = ident.partition(":")
-    pid, _, start = rest.partition(":")
-    if host != socket.gethostname() or not pid.isdigit():
-        return False
-    if not Path("/proc/self/stat").exists():  # no /proc: the pid alone
-        try:
-            os.kill(int(pid), 0)
-        except ProcessLookupError:
-            return True
-        except OSError:
-            return False
-        return False
-    now = _start_ticks(int(pid))
-    return now is None or (bool(start) and now != start)
 
 
 def job_key(stage: str, rule: str, run_name: str | None, params: Mapping[str, Any]) -> str:
