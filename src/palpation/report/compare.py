@@ -16,6 +16,8 @@ from typing import NamedTuple
 
 import pandas as pd
 
+from palpation.metrics.aggregate import summarise_seeds
+
 
 class Source(NamedTuple):
     path: str  # relative to the results root
@@ -124,8 +126,8 @@ def compare(ours: float, ours_std: float, paper: float, paper_std: float, k: flo
 
 def seed_stats(values) -> tuple[float, float, int]:
     """mean, sample std (ddof 1; NaN for one seed) and n."""
-    v = pd.Series(values, dtype="float64")
-    return float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else math.nan, len(v)
+    s = summarise_seeds(values)
+    return s["mean"], s["std"], s["n"]
 
 
 def num(v, digits: int = 4) -> str:
@@ -150,12 +152,6 @@ def signed(v, digits: int = 4) -> str:
 def pm(mean: float, std: float, digits: int = 4) -> str:
     return num(mean, digits) if (std is None or math.isnan(std) or std == 0) else \
         f"{mean:.{digits}f} ± {std:.{digits}f}"
-
-
-def markdown(header: list[str], rows: list[list]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
-    return "\n".join(lines) + "\n"
 
 
 @dataclass(frozen=True)

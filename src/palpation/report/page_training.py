@@ -11,9 +11,10 @@ import math
 
 import pandas as pd
 
-from palpation.report.compare import TITLES, Gap, Section, compare, markdown, num, pm, seed_stats, signed
+from palpation.report.compare import TITLES, Gap, Section, compare, num, pm, seed_stats, signed
 from palpation.report.paper import (CONFIG_TITLES, MAPS_PHOTO_THRESHOLD, MAPS_VIDEO_PHOTO_IOU, PAPER_DIGITS,
                                     SEED_SWEEP, TABLE3, TABLE4, TABLE4_MAPS)
+from palpation.report.tables import markdown
 
 NAMES = {"auroc": "AUROC", "ap": "AP", "fg_iou": "FG IoU", "bg_iou": "BG IoU", "chance": "chance", "mcc": "MCC",
          "f1": "F1", "precision": "Prec", "recall": "Rec", "d_bar_mm": "d̄ mm", "tp": "TP", "fp": "FP",

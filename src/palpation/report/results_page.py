@@ -20,7 +20,8 @@ import yaml
 from palpation.io import save_text
 from palpation.report import page_training as training
 from palpation.report import page_twin as twin
-from palpation.report.compare import SOURCES, TITLES, Section, markdown, read_json, read_table
+from palpation.report.compare import SOURCES, TITLES, Section, read_json, read_table
+from palpation.report.tables import markdown
 
 ORDER = ("data", "calibration", "loop", "seed_sweep", "table3", "table4_markers", "table4_maps", "twin_ablation")
 FIGURES = (  # (caption, path under the results root; a glob lists every match)
