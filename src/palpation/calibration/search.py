@@ -124,6 +124,17 @@ def interrupted(study: optuna.Study, space: Sequence[ParamSpec]) -> list[tuple[o
     return batch
 
 
+def next_batch(study: optuna.Study, space: Sequence[ParamSpec], n_trials: int, n_startup: int,
+               batch_size: int) -> list[tuple[optuna.Trial, dict]]:
+    """The trials to simulate next: a batch a killed search left unfinished, else the startup (random)
+    trials together, then `batch_size` proposals at a time; empty once `n_trials` are complete."""
+    batch = interrupted(study, space)
+    if batch or (done := completed(study)) >= n_trials:
+        return batch
+    size = (n_startup - done) if done < n_startup else batch_size
+    return ask_batch(study, space, max(1, min(n_trials - done, size)))
+
+
 def completed(study: optuna.Study) -> int:
     return len(study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)))
 
@@ -138,13 +149,7 @@ def run_search(study: optuna.Study, space: Sequence[ParamSpec], n_trials: int, n
     proposals (1 keeps a GP search strictly sequential, as the reference's). A batch a killed search
     left unfinished is simulated first.
     """
-    while True:
-        batch = interrupted(study, space)
-        if not batch:
-            if (done := completed(study)) >= n_trials:
-                break
-            size = max(1, min(n_trials - done, (n_startup - done) if done < n_startup else batch_size))
-            batch = ask_batch(study, space, size)
+    while batch := next_batch(study, space, n_trials, n_startup, batch_size):
         trials, proposals = [t for t, _ in batch], [p for _, p in batch]
         results = evaluate(proposals)
         for trial, result in zip(trials, results, strict=True):

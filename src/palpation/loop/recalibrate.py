@@ -21,7 +21,7 @@ import numpy as np
 import optuna
 
 from palpation.calibration.objective import marker_mae_px
-from palpation.calibration.search import (ParamSpec, ask_batch, completed, interrupted, make_sampler, open_study,
+from palpation.calibration.search import (ParamSpec, completed, make_sampler, next_batch, open_study,
                                           validate_space)
 from palpation.loop.config import SearchSettings
 from palpation.loop.effects import PARAMS, bounds, clip
@@ -78,11 +78,8 @@ def recalibrate(problems: list, simulate: Simulate, settings: SearchSettings, db
     while True:
         asks = []
         for run in runs:
-            batch = interrupted(run["study"], run["space"])  # a killed run's last batch comes first
-            done = completed(run["study"])
-            if not batch and done < settings.n_trials:
-                size = (settings.n_startup - done) if done < settings.n_startup else settings.batch_size
-                batch = ask_batch(run["study"], run["space"], max(1, min(settings.n_trials - done, size)))
+            batch = next_batch(run["study"], run["space"], settings.n_trials, settings.n_startup,
+                               settings.batch_size)  # a killed run's last batch comes first
             asks += [(run, trial, props) for trial, props in batch]
         if not asks:
             break
