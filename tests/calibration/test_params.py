@@ -4,17 +4,16 @@ import logging
 
 import pytest
 
-from palpation.calibration.params import (REGISTRY, TwinParam, check_space, inert, register, to_env,
-                                          twin_overrides, warn_inert)
+from palpation.calibration.config import CalibrationConfig, SearchParam
+from palpation.calibration.params import REGISTRY, check_space, inert, to_env, twin_overrides, warn_inert
 from palpation.calibration.search import ParamSpec
 from palpation.twin.config import TwinConfig
-from palpation.twin.runner import PARAM_DEFAULTS
-from palpation.twin.simulator import ENV_PARAM_KEYS
+from palpation.twin.parameters import ENV_KEYS, PARAMETERS
 
 
-def test_every_name_maps_to_a_per_env_parameter_of_the_twin():
-    assert set(PARAM_DEFAULTS) == set(ENV_PARAM_KEYS) - {"vessel"}
-    assert {p.env_key for p in REGISTRY.values()} == set(PARAM_DEFAULTS)
+def test_every_name_maps_to_a_per_env_parameter_every_twin_takes():
+    assert {p.field for p in REGISTRY.values()} == set(ENV_KEYS)
+    assert set(REGISTRY) == set(ENV_KEYS) | {"k_n_ref", "k_t_ref"}  # not alpha / shell_ratio: layered only
 
 
 def test_reference_units_are_converted_to_the_twin():
@@ -51,11 +50,22 @@ def test_contact_terms_without_a_partner_are_flagged(caplog):
     assert "cannot act" in caplog.text
 
 
-def test_register_refuses_what_the_twin_does_not_take():
-    with pytest.raises(ValueError, match="not a per-env parameter"):
-        register(TwinParam("alpha", "alpha", "N s/m"))
-    register(TwinParam("E_kpa", "E", "kPa", 1e3))
-    try:
-        assert to_env({"E_kpa": 881.4}) == pytest.approx({"E": 881400.0})
-    finally:
-        REGISTRY.pop("E_kpa")
+@pytest.mark.parametrize("spec, said", [
+    (ParamSpec("E", 1e4, 1e6), "range [10000, 1e+06] of 'E' leaves its physical bounds [100000, 2e+06] Pa"),
+    (ParamSpec("k_n_ref", 1e4, 1e6), "'k_n_ref' leaves its physical bounds [5000, 100000]"),
+    (ParamSpec("mu", 0.0, 3.0, log=False), "'mu' leaves"),
+    (ParamSpec("E", 1e5, 1e6), ""),
+])
+def test_search_ranges_outside_the_registry_bounds_are_logged(spec, said, caplog):
+    with caplog.at_level(logging.WARNING):
+        check_space([spec], {})
+    assert (said in caplog.text) if said else "leaves" not in caplog.text
+
+
+def test_bounds_left_out_come_from_the_registry():
+    cfg = CalibrationConfig(params=[SearchParam("k_n_ref"), SearchParam("E", 2e5, None, False)])
+    k_n, E = PARAMETERS["k_n"], PARAMETERS["E"]
+    assert cfg.space() == [ParamSpec("k_n_ref", k_n.low * 5, k_n.high * 5, True), ParamSpec("E", 2e5, E.high, False)]
+    check_space(cfg.space(), {})
+    with pytest.raises(ValueError, match=r"calibration.params: unknown twin parameter\(s\) \['young'\]"):
+        CalibrationConfig(params=[SearchParam("young")]).space()

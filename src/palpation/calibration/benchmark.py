@@ -18,14 +18,14 @@ import logging
 import sys
 import tempfile
 import time
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import warp as wp
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from palpation.calibration.config import CalibrationConfig
+from palpation.calibration.config import CalibrationConfig, PaperParams
 from palpation.calibration.study import build_objective, prepare, run_study
 from palpation.io import save_json
 from palpation.markers.template import rest_template
@@ -40,7 +40,6 @@ from palpation.twin.mesh import SensorMesh
 log = logging.getLogger(__name__)
 
 PRESETS = ("project", "reference")  # conf/calibration/<name>.yaml
-PAPER = {"E": 881400.0, "k_n_ref": 94908.307}
 
 
 def preset(name: str) -> CalibrationConfig:
@@ -55,7 +54,7 @@ def bench_objective(kind: str, mesh: SensorMesh, twin: TwinConfig, mset, n_trial
     cfg = replace(preset(kind), n_trials=n_trials, n_startup=n_startup, max_frames=max_frames)
     prep = prepare(cfg, twin, mset, source="measured set")
     binding = bind_markers(mesh.nodes, mesh.dome_nodes, rest_template())
-    paper = {k: v for k, v in PAPER.items() if k in {p.name for p in cfg.params}}
+    paper = {k: v for k, v in asdict(PaperParams()).items() if k in {p.name for p in cfg.params}}
     warm = build_objective(replace(prep, cfg=replace(cfg, max_frames=2)), mesh, binding, device)
     warm.evaluate([paper])  # loads (or compiles) every kernel outside the timing
     objective = build_objective(prep, mesh, binding, device)

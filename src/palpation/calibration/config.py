@@ -12,30 +12,34 @@ from typing import Optional
 
 from hydra.core.config_store import ConfigStore
 
+from palpation import paper
 from palpation.calibration.objective import ANGLE_SOURCES, GEOMETRIES, INTERACTIONS
+from palpation.calibration.params import REGISTRY, check_names
 from palpation.calibration.search import ParamSpec
 
 
 @dataclass
 class SearchParam:
+    """One searched name; low / high / log left out (null) take the registry's (twin.parameters)."""
+
     name: str = "E"
-    low: float = 1e5
-    high: float = 1e6
-    log: bool = True
+    low: Optional[float] = None
+    high: Optional[float] = None
+    log: Optional[bool] = None
 
 
 @dataclass
 class PaperParams:
     """The paper's adopted twin (SPEC §6.4): E rounded to 881.4 kPa, k_n 94,908 reference units."""
 
-    E: float = 881400.0
-    k_n_ref: float = 94908.307
+    E: float = paper.E
+    k_n_ref: float = paper.K_N_REF
 
 
 @dataclass
 class CalibrationConfig:
     objective: str = "project"  # project (mean photo MAE, minimised) | reference (SPEC §6.2, maximised)
-    params: list[SearchParam] = field(default_factory=lambda: [SearchParam()])
+    params: list[SearchParam] = field(default_factory=lambda: [SearchParam("E", 1e5, 1e6, True)])  # SPEC §6.3
     fixed: dict[str, float] = field(default_factory=dict)  # registry name -> value held in every trial
     interactions: list[str] = field(default_factory=lambda: list(INTERACTIONS))
     holdout: Optional[str] = None  # one interaction left out of the fit (reported, not fitted)
@@ -58,7 +62,17 @@ class CalibrationConfig:
     max_frames: Optional[int] = None  # cut every trajectory (smoke tests only)
 
     def space(self) -> list[ParamSpec]:
-        return [ParamSpec(p.name, float(p.low), float(p.high), bool(p.log)) for p in self.params]
+        """The search space; a bound or log flag left null comes from the registry (calibration.params)."""
+        out = []
+        for p in self.params:
+            low, high, log = p.low, p.high, p.log
+            if None in (low, high, log):
+                check_names([p.name], "calibration.params")
+                entry = REGISTRY[p.name]
+                low, high = entry.low if low is None else low, entry.high if high is None else high
+                log = entry.log if log is None else log
+            out.append(ParamSpec(p.name, float(low), float(high), bool(log)))
+        return out
 
     def fit_interactions(self) -> list[str]:
         """The photos the objective scores (the reference objective scores only the slide photo)."""

@@ -1,7 +1,11 @@
 """Candidate effects the residual loop can add to the twin: each a switch plus parameters, with nominal steps.
 
-A *parameter* is one searched number of the twin, in the units of its config field (SI, except the
-camera in px/deg and the mount in mm/deg), and says where it acts:
+Both come from the twin's parameter registry (twin.parameters): an entry with a `LoopStep` belongs to
+an effect of EFFECT_TITLES and carries its nominal step, so a new effect is a registry entry, not code
+here.
+
+A *parameter* is an entry of the twin's registry (twin.parameters: unit, bounds, log scale, default,
+dependencies); the loop searches E and the parameters its effects name. Each acts:
 * ("env", key): a per-env parameter of `BatchedTwin` (k_s, k_t, mu, E, and with the layered kernel
   alpha and shell_ratio);
 * ("camera", field): twin.camera, an image similarity applied at projection (see CameraConfig);
@@ -21,17 +25,27 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from palpation.twin.config import TwinConfig
+from palpation.twin.parameters import EFFECT_TITLES, PARAMETERS, TwinParameter, by_env_key
+
 
 @dataclass(frozen=True)
 class Param:
+    """A twin parameter as the loop searches it (read from twin.parameters, never restated)."""
+
     name: str
     unit: str
     low: float
     high: float
     log: bool
-    target: tuple[str, str]  # ("env" | "camera" | "mount", key or field)
+    target: tuple[str, str]  # ("env" | "camera" | "mount" | "markers", key or field)
     scale: float = 1.0  # config value = value * scale (mount dz: mm -> m)
     default: float = 0.0  # value with the effect off
+
+    @classmethod
+    def of(cls, p: TwinParameter) -> "Param":
+        return cls(p.name, p.unit, p.low, p.high, p.log, ("env" if p.per_env else p.section, p.field), p.scale,
+                   p.off_value(TwinConfig()))
 
 
 @dataclass(frozen=True)
@@ -49,50 +63,27 @@ class Effect:
     dofs: tuple[Dof, ...]
 
 
-PARAMS: dict[str, Param] = {p.name: p for p in (
-    Param("E", "Pa", 1.0e5, 2.0e6, True, ("env", "E"), default=881400.0),
-    Param("k_s", "N/m per surface node", 1.0e2, 3.0e4, True, ("env", "k_s")),
-    Param("k_t", "N s/m", 0.0, 200.0, False, ("env", "k_t")),
-    Param("mu", "1", 0.0, 1.5, False, ("env", "mu")),
-    Param("alpha", "N s/m", 2.0e-3, 1.5, True, ("env", "alpha"), default=0.02),
-    Param("shell_ratio", "E_shell / E", 1.0, 4.0, True, ("env", "shell_ratio"), default=1.0),
-    Param("cam_f_scale", "1", 0.85, 1.15, False, ("camera", "f_scale"), default=1.0),
-    Param("cam_rotation_deg", "deg", -15.0, 15.0, False, ("camera", "rotation_deg")),
-    Param("cam_dx_px", "px", -60.0, 60.0, False, ("camera", "dx_px")),
-    Param("cam_dy_px", "px", -60.0, 60.0, False, ("camera", "dy_px")),
-    Param("mount_dz_mm", "mm", -1.5, 1.5, False, ("mount", "dz"), scale=1e-3),
-    Param("mount_tilt_x_deg", "deg", -6.0, 6.0, False, ("mount", "tilt_x_deg")),
-    Param("mount_tilt_y_deg", "deg", -6.0, 6.0, False, ("mount", "tilt_y_deg")),
-    Param("marker_anchor", "fraction of the rest offset", 0.0, 1.5, False, ("markers", "anchor")),
-)}
+def _effect(name: str, title: str) -> Effect:
+    """An effect from its registry entries (twin.parameters: LoopStep), dofs in registry order."""
+    entries = [p for p in PARAMETERS.values() if p.loop is not None and p.loop.effect == name]
+    if not entries:
+        raise ValueError(f"loop effect '{name}' has no parameter in palpation/twin/parameters.py (LoopStep)")
+    dofs: dict[str, list] = {}
+    for p in entries:
+        dofs.setdefault(p.loop.dof, []).append(p)
+    return Effect(name, title, tuple(p.name for p in entries),
+                  tuple(Dof(d, tuple((p.name, p.loop.mode, p.loop.amount) for p in ps), ps[0].loop.nonneg)
+                        for d, ps in dofs.items()))
 
 
-def _dof(name, nonneg, *moves):
-    return Dof(name, tuple(moves), nonneg)
+_stray = {p.loop.effect for p in PARAMETERS.values() if p.loop is not None} - set(EFFECT_TITLES)
+if _stray:
+    raise ValueError(f"twin.parameters: LoopStep effect(s) {sorted(_stray)} missing from EFFECT_TITLES")
+EFFECTS: dict[str, Effect] = {name: _effect(name, title) for name, title in EFFECT_TITLES.items()}
 
-
-EFFECTS: dict[str, Effect] = {e.name: e for e in (
-    Effect("surface_contact", "sensor-phantom surface contact (k_s)", ("k_s",),
-           (_dof("k_s", True, ("k_s", "add", 2.0e3)),)),
-    Effect("friction", "tangential friction (k_t, mu)", ("k_t", "mu"),
-           (_dof("friction", True, ("k_t", "add", 20.0), ("mu", "add", 0.5)),)),
-    Effect("camera", "camera intrinsics error (f, principal point, image rotation)",
-           ("cam_f_scale", "cam_rotation_deg", "cam_dx_px", "cam_dy_px"),
-           (_dof("f_scale", False, ("cam_f_scale", "add", 0.05)),
-            _dof("rotation", False, ("cam_rotation_deg", "add", 5.0)),
-            _dof("dx", False, ("cam_dx_px", "add", 20.0)),
-            _dof("dy", False, ("cam_dy_px", "add", 20.0)))),
-    Effect("mount", "sensor mounting offset/tilt", ("mount_dz_mm", "mount_tilt_x_deg", "mount_tilt_y_deg"),
-           (_dof("dz", False, ("mount_dz_mm", "add", 0.5)),
-            _dof("tilt_x", False, ("mount_tilt_x_deg", "add", 2.0)),
-            _dof("tilt_y", False, ("mount_tilt_y_deg", "add", 2.0)))),
-    Effect("viscous", "rate-dependent (viscous) lag: damping alpha", ("alpha",),
-           (_dof("alpha", False, ("alpha", "mul", 5.0)),)),
-    Effect("layered", "layered skin: stiffer outer shell (E_shell / E)", ("shell_ratio",),
-           (_dof("shell_ratio", True, ("shell_ratio", "add", 1.0)),)),
-    Effect("marker_anchor", "marker binding offset: markers anchored at the rest template", ("marker_anchor",),
-           (_dof("anchor", True, ("marker_anchor", "add", 0.5)),)),
-)}
+# the loop's parameters: E (searched every round, loop.recalibrate) and every effect's, in registry order
+LOOP_PARAMS = {"E", *(n for e in EFFECTS.values() for n in e.params)}
+PARAMS: dict[str, Param] = {n: Param.of(p) for n, p in PARAMETERS.items() if n in LOOP_PARAMS}
 
 
 def check_effects(names, where: str = "loop.effects") -> list[str]:
@@ -147,21 +138,19 @@ def split(params: Mapping[str, float]) -> tuple[dict, dict, dict, dict]:
 def twin_overrides(params: Mapping[str, float], effects, shell_thickness_m: float) -> dict[str, dict]:
     """The TwinConfig sections and fields a loop result sets, switches included (for twin_fit/*.yaml)."""
     env, camera, mount, markers = split(params)
-    section = {"E": ("material", "E"), "nu": ("material", "nu"), "k_s": ("contact", "k_s"),
-               "k_t": ("contact", "k_t"), "mu": ("contact", "mu"), "alpha": ("damping", "alpha"),
-               "shell_ratio": ("material", "shell_ratio")}
     out: dict[str, dict] = {}
     for key, value in env.items():
-        sec, field = section[key]
-        out.setdefault(sec, {})[field] = value
+        p = by_env_key(key)
+        out.setdefault(p.section, {})[p.field] = value
     if camera:
         out["camera"] = camera
     if mount:
         out["mount"] = mount
     if markers:
         out["markers"] = markers
-    if "surface_contact" in effects or "friction" in effects:
+    needs = {PARAMETERS[n].needs for e in effects for n in EFFECTS[e].params}  # the switches they act through
+    if needs & {"phantom", "contact"}:  # no vessel in the loop's states: contact means the phantom
         out.setdefault("contact", {})["phantom_contact"] = True
-    if "layered" in effects:
+    if "shell" in needs:
         out.setdefault("material", {})["shell_thickness"] = float(shell_thickness_m)
     return out

@@ -20,8 +20,7 @@ from palpation.loop.effects import split
 from palpation.twin.config import TwinConfig
 from palpation.twin.markers import CameraBinding, ImageSimilarity, bind_markers_through, project_markers_np
 from palpation.twin.mesh import SensorMesh
-from palpation.twin.runner import EnvRequest, plan_requests
-from palpation.twin.simulator import BatchedTwin
+from palpation.twin.runner import EnvRequest, ScheduledBatch, plan_requests
 from palpation.twin.trajectory import mount_offset, padded_schedule, with_mount
 
 log = logging.getLogger(__name__)
@@ -103,33 +102,20 @@ class LoopSimulator:
 
     def _run(self, group: list[tuple]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Simulate distinct physics to their last frame: final nodes (n, N, 3), poses, failed flags."""
-        reqs = [EnvRequest(kind=k, depth_mm=d, angle_deg=a, heading_offset_deg=h, record="last")
-                for k, d, a, h, _, _ in group]
+        reqs = [EnvRequest(k, h, depth_mm=d, angle_deg=a, record="last", **dict(params)).resolved(self.cfg)
+                for k, d, a, h, params, _ in group]
         trajs = plan_requests(self.mesh, self.cfg, reqs, self.max_frames)
         trajs = [with_mount(t, mount_offset(**{"dz_m" if k == "dz" else k: v for k, v in mount}))
                  if mount else t for t, (*_, mount) in zip(trajs, group)]
         schedule, lengths = padded_schedule(trajs)
-        env = {}
-        for i, (*_, params, _) in enumerate(group):
-            for k, v in params:
-                env.setdefault(k, {})[i] = v
-        defaults = self._defaults()
-        arrays = {k: np.array([vals.get(i, defaults[k]) for i in range(len(group))]) for k, vals in env.items()}
-        sim = BatchedTwin(self.mesh, len(group), self.cfg, {**arrays, "vessel": False}, device=self.device)
-        sim.reset(np.stack([t.T_BA0 for t in trajs]))
+        batch = ScheduledBatch(self.mesh, self.cfg, reqs, trajs, schedule, self.device)
         nodes = np.full((len(group), self.mesh.n_nodes, 3), np.nan, np.float32)
         failed = np.zeros(len(group), bool)
         ends = {int(e) - 1 for e in lengths}
-        for f in range(len(schedule)):
-            sim.step_frame(schedule[f])
+        for f in batch.frames():
             if f in ends:  # read only where some env ends; the failure flag is sticky
                 done = lengths - 1 == f
-                nodes[done] = sim.positions_world()[done]
-                failed[done] = sim.failed()[done]
+                nodes[done] = batch.sim.positions_world()[done]
+                failed[done] = batch.sim.failed()[done]
         T_last = np.stack([t.T_BA[-1] for t in trajs])
         return nodes, T_last, failed | ~np.all(np.isfinite(nodes), axis=(1, 2))
-
-    def _defaults(self) -> dict[str, float]:
-        c, m = self.cfg.contact, self.cfg.material
-        return {"E": m.E, "nu": m.nu, "k_n": c.k_n, "c_n": c.c_n, "k_t": c.k_t, "mu": c.mu, "k_s": c.k_s,
-                "c_s": c.c_s, "alpha": self.cfg.damping.alpha, "shell_ratio": m.shell_ratio}

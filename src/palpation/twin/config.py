@@ -16,10 +16,9 @@ from dataclasses import dataclass, field
 
 from hydra.core.config_store import ConfigStore
 
-REF_LENGTH_SCALE = 5.0  # reference sim length / physical length (SPEC §1.2)
-REF_K_N = 94908.307  # calibrated k_n of the reference, reference units (SPEC §3.3)
-REF_C_N = 100.0
-REF_ALPHA = 0.1  # reference damping alpha, reference units (SPEC §2.3)
+from palpation import paper
+
+REF_LENGTH_SCALE = paper.LENGTH_SCALE  # reference sim length / physical length (SPEC §1.2)
 
 
 def from_reference_units(*, k_n: float | None = None, c_n: float | None = None,
@@ -39,9 +38,9 @@ class MeshConfig:
 
 @dataclass
 class MaterialConfig:
-    E: float = 881400.0  # Pa (SPEC §2.3, calibrated)
-    nu: float = 0.497
-    rho: float = 1100.0  # kg/m^3
+    E: float = paper.E  # Pa (SPEC §2.3, calibrated)
+    nu: float = paper.NU
+    rho: float = paper.RHO  # kg/m^3
     # "standard": mu, lambda from E, nu as the reference does (small-strain modulus then ~0.75 E
     # at nu=0.497, docs/twin.md); "smith": Smith et al. 2018 re-parametrisation, small-strain E exact.
     lame: str = "standard"
@@ -54,8 +53,8 @@ class MaterialConfig:
 
 @dataclass
 class DampingConfig:
-    alpha: float = REF_ALPHA / REF_LENGTH_SCALE  # N s/m per tet edge pair (reference 0.1 at x5 scale)
-    beta: float = 0.01  # fraction removed from the elastic force (SPEC §2.3)
+    alpha: float = paper.ALPHA_REF / REF_LENGTH_SCALE  # N s/m per tet edge pair (reference 0.1 at x5 scale)
+    beta: float = paper.BETA  # fraction removed from the elastic force (SPEC §2.3)
     per_env: bool = False  # alpha per env ("alpha" env parameter; selects the layered elastic kernel)
 
 
@@ -73,8 +72,8 @@ class IntegratorConfig:
 
 @dataclass
 class ContactConfig:
-    k_n: float = REF_K_N / REF_LENGTH_SCALE  # N/m, sensor-vessel normal stiffness
-    c_n: float = REF_C_N  # N s/m^2, multiplies the closing speed AND the depth (reference form)
+    k_n: float = paper.K_N_REF / REF_LENGTH_SCALE  # N/m, sensor-vessel normal stiffness
+    c_n: float = paper.C_N_REF  # N s/m^2, multiplies the closing speed AND the depth (reference form)
     k_t: float = 0.0  # N s/m, tangential (viscous) stiffness
     mu: float = 0.0  # Coulomb friction coefficient
     vessel: bool = True  # default for the per-env vessel switch

@@ -14,7 +14,7 @@ import logging
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import warp as wp
@@ -26,6 +26,7 @@ from palpation.twin.markers import (ImageSimilarity, MarkerBinding, MarkerProjec
                                     bind_markers_through, centreline_A, marker_labels)
 from palpation.twin.mesh import SensorMesh
 from palpation.twin.output import FailedRecord, TrajectoryRecord
+from palpation.twin.parameters import by_env_key, per_env_keys
 from palpation.twin.simulator import BatchedTwin
 from palpation.twin.trajectory import (Trajectory, mount_offset, padded_schedule, plan_trajectories, waypoints,
                                        with_mount)
@@ -34,51 +35,55 @@ log = logging.getLogger(__name__)
 READ_FAILED_EVERY = 20  # frames between host reads of the failure flags (the reference's interval)
 
 
-# per-env twin parameters -> (TwinConfig section, field) of their default; names as BatchedTwin's
-PARAM_DEFAULTS = {"E": ("material", "E"), "nu": ("material", "nu"), "k_n": ("contact", "k_n"),
-                  "c_n": ("contact", "c_n"), "k_t": ("contact", "k_t"), "mu": ("contact", "mu"),
-                  "k_s": ("contact", "k_s"), "c_s": ("contact", "c_s")}
 GEOMETRY_KEYS = ("heading_offset_deg", "depth_mm", "angle_deg")
 
 
-@dataclass
+@dataclass(init=False)
 class EnvRequest:
-    """One environment of a batch. Parameters are in the twin's (physical) units, as in TwinConfig.
+    """One environment of a batch: an interaction, its geometry and its per-env twin parameters.
 
-    A parameter left None comes from the config; depth_mm / angle_deg left None are SPEC's canonical
-    geometry of the interaction (twin.trajectory.geometry).
+    `twin` holds registry parameters (twin.parameters.per_env_keys, in their units), passed as keywords
+    (`EnvRequest("press", E=6e5)`) and readable as attributes (`req.E`); one left out comes from the
+    config. depth_mm / angle_deg left None are SPEC's canonical geometry (twin.trajectory.geometry).
     """
 
     kind: str
-    heading_offset_deg: float = 0.0
-    E: float | None = None  # Pa; None = cfg.material.E
-    k_n: float | None = None  # N/m; None = cfg.contact.k_n
-    c_n: float | None = None  # None = cfg.contact.c_n
-    vessel: bool = False
-    seed: int = 0
-    name: str = ""
-    record: str = "trajectory"  # "trajectory": the SPEC window; "last": the last frame only
-    nu: float | None = None
-    k_t: float | None = None  # N s/m
-    mu: float | None = None
-    k_s: float | None = None  # N/m per node (phantom contact only)
-    c_s: float | None = None
-    depth_mm: float | None = None  # final tip depth below the phantom top; None = canonical
-    angle_deg: float | None = None  # twist angle; None = canonical (twist_z: 30 deg)
+    heading_offset_deg: float
+    vessel: bool
+    seed: int
+    name: str
+    record: str  # "trajectory": the SPEC window; "last": the last frame only
+    depth_mm: float | None  # final tip depth below the phantom top; None = canonical
+    angle_deg: float | None  # twist angle; None = canonical (twist_z: 30 deg)
+    twin: dict
+
+    def __init__(self, kind: str, heading_offset_deg: float = 0.0, *, vessel: bool = False, seed: int = 0,
+                 name: str = "", record: str = "trajectory", depth_mm: float | None = None,
+                 angle_deg: float | None = None, **twin: float | None):
+        unknown = set(twin) - set(per_env_keys())
+        if unknown:
+            raise ValueError(f"EnvRequest: unknown twin parameter(s) {sorted(unknown)}; use {per_env_keys()} "
+                             "(palpation.twin.parameters)")
+        self.kind, self.heading_offset_deg, self.vessel, self.seed = kind, heading_offset_deg, vessel, seed
+        self.name, self.record, self.depth_mm, self.angle_deg = name, record, depth_mm, angle_deg
+        self.twin = {k: v for k, v in twin.items() if v is not None}
+
+    def __getattr__(self, key: str):
+        if key in per_env_keys():  # a twin parameter not set (None = from the config)
+            return self.__dict__.get("twin", {}).get(key)
+        raise AttributeError(f"'EnvRequest' object has no attribute '{key}'")
 
     def resolved(self, cfg: TwinConfig) -> "EnvRequest":
-        """A copy with every None twin parameter taken from the config (geometry stays as given)."""
-        fields = asdict(self)
-        for key, (section, name) in PARAM_DEFAULTS.items():
-            if fields[key] is None:
-                fields[key] = getattr(getattr(cfg, section), name)
-        return EnvRequest(**fields)
+        """A copy with every per-env parameter this twin takes filled from the config (geometry as given)."""
+        defaults = {k: by_env_key(k).default(cfg) for k in per_env_keys(cfg.layered)}
+        return EnvRequest(self.kind, self.heading_offset_deg, vessel=self.vessel, seed=self.seed, name=self.name,
+                          record=self.record, depth_mm=self.depth_mm, angle_deg=self.angle_deg,
+                          **{**defaults, **self.twin})
 
     def twin_params(self) -> dict:
         """The JSON-able parameters a record keeps (after `resolved`)."""
-        return {**{k: getattr(self, k) for k in PARAM_DEFAULTS}, "vessel": self.vessel,
-                "heading_offset_deg": self.heading_offset_deg, "depth_mm": self.depth_mm,
-                "angle_deg": self.angle_deg}
+        return {**self.twin, "vessel": self.vessel, "heading_offset_deg": self.heading_offset_deg,
+                "depth_mm": self.depth_mm, "angle_deg": self.angle_deg}
 
 
 @dataclass
@@ -90,14 +95,40 @@ class BatchResult:
     failed_mask: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
 
+class ScheduledBatch:
+    """The one loop that runs a BatchedTwin batch (run_batch, snapshot.run_until, loop.simulate).
+
+    Builds the twin from resolved requests, poses every env at its trajectory's start, uploads the
+    whole (frames, n, 4, 4) schedule and replays one graph per frame; `frames` yields after each so
+    the caller reads what it needs (sparse failure flags, a stop rule, final nodes).
+    """
+
+    def __init__(self, mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest], trajs: list[Trajectory],
+                 schedule: np.ndarray, device):
+        self.schedule = schedule
+        self.sim = BatchedTwin(mesh, len(requests), cfg, env_params(requests), device=device)
+        self.sim.reset(np.stack([t.T_BA0 for t in trajs]))
+
+    def frames(self, extra=None, progress: bool = False):
+        """Step the schedule frame by frame, yielding each frame index once it is simulated.
+
+        `extra(frame_index, offset)` launches kernels captured after each frame's physics
+        (BatchedTwin.set_schedule)."""
+        self.sim.set_schedule(self.schedule, extra)
+        for f in bar(range(len(self.schedule)), desc=f"twin x{self.sim.n_envs}", unit="frame", enabled=progress,
+                     leave=False):
+            self.sim.step_scheduled()  # one graph launch
+            yield f
+
+
 def tip_node_B(mesh: SensorMesh) -> np.ndarray:
     """The undeformed tip the controller tracks: the highest node in B (and in E)."""
     return mesh.nodes[np.argmax(mesh.nodes[:, 2])]
 
 
 def env_params(requests: list[EnvRequest]) -> dict[str, np.ndarray]:
-    """Per-env arrays for BatchedTwin from resolved requests."""
-    out = {k: np.array([getattr(r, k) for r in requests], np.float64) for k in PARAM_DEFAULTS}
+    """Per-env arrays for BatchedTwin from resolved requests (all resolved against one config)."""
+    out = {k: np.array([r.twin[k] for r in requests], np.float64) for k in requests[0].twin}
     out["vessel"] = np.array([r.vessel for r in requests], bool)
     return out
 
@@ -160,8 +191,8 @@ def run_batch(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest],
     n, n_frames = len(reqs), len(schedule)
 
     start = time.perf_counter()
-    sim = BatchedTwin(mesh, n, cfg, env_params(reqs), device=device)
-    sim.reset(np.stack([t.T_BA0 for t in trajs]))
+    batch = ScheduledBatch(mesh, cfg, reqs, trajs, schedule, device)
+    sim = batch.sim
     proj = MarkerProjector(binding, schedule, mesh.n_nodes, first, end, device=device)
     contact_dev = wp.zeros((n_frames, n), dtype=wp.int32, device=device)  # written on device, read once
 
@@ -170,14 +201,12 @@ def run_batch(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest],
                   outputs=[contact_dev])
         proj.extract_at(sim.x, frame_index, offset)
 
-    sim.set_schedule(schedule, per_frame)
     failed_at = np.full(n, -1)
     # the simulator's failure flag is sticky, so reading it sparsely (plus at each env's last frame,
     # to tell a failure inside an env's own frames from one after it finished) loses nothing
     checks = set(range(READ_FAILED_EVERY - 1, n_frames, READ_FAILED_EVERY)) | set((lengths - 1).tolist())
     checked_to = 0  # frames [0, checked_to) are covered by earlier checks
-    for f in bar(range(n_frames), desc=f"twin x{n}", unit="frame", enabled=progress, leave=False):
-        sim.step_scheduled()  # one graph launch
+    for f in batch.frames(per_frame, progress):
         if f in checks:
             # blame only envs still inside their own frames since the last check
             bad = sim.failed() & (failed_at < 0) & (lengths > checked_to)
@@ -229,13 +258,13 @@ def simulate_states(mesh: SensorMesh, cfg: TwinConfig, requests: list[tuple[str,
                     ) -> tuple[np.ndarray, np.ndarray]:
     """For calibration: markers at the last frame of each (kind, params) request.
 
-    params keys (all optional): any per-env twin parameter (PARAM_DEFAULTS: E, nu, k_n, c_n, k_t,
-    mu, k_s, c_s), vessel, heading_offset_deg, depth_mm, angle_deg. Every request is checked before
+    params keys (all optional): any per-env twin parameter (twin.parameters.per_env_keys), vessel,
+    heading_offset_deg, depth_mm, angle_deg. Every request is checked before
     anything runs. One batch, or with `split_by_kind` one batch per kind: on a CPU every env costs
     the longest env's frames, so a 36-frame press should not ride along a 398-frame slide.
     Returns (n, 127, 2) float32 pixels (NaN for a failed env) and (n,) bool failed flags.
     """
-    allowed = set(PARAM_DEFAULTS) | set(GEOMETRY_KEYS) | {"vessel"}
+    allowed = set(per_env_keys()) | set(GEOMETRY_KEYS) | {"vessel"}
     envs = []
     for i, (kind, params) in enumerate(requests):
         unknown = set(params) - allowed

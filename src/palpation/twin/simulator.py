@@ -22,13 +22,10 @@ from palpation.twin.integrate import (advance_frame, check_nodes, check_tets, in
                                       integrate_nodes, load_frame_poses, reset_velocities,
                                       set_control_velocity, snap_fixed_nodes)
 from palpation.twin.mesh import SensorMesh, build_vessel_points, shell_weights
+from palpation.twin.parameters import CONTACT_KEYS, ENV_KEYS, LAYERED_KEYS, by_env_key, per_env_keys
 
 log = logging.getLogger(__name__)
 
-# per-env parameters a caller may set; the rest of the physics is shared by all envs
-ENV_PARAM_KEYS = ("E", "nu", "k_n", "c_n", "k_t", "mu", "k_s", "c_s", "vessel")
-# per env only with the layered kernel (cfg.layered: material.shell_thickness > 0 or damping.per_env)
-EXTRA_ENV_KEYS = ("alpha", "shell_ratio")
 
 
 def resolve_device(name: str):
@@ -109,7 +106,7 @@ class BatchedTwin:
 
         c, s = cfg.contact, cfg.scene
         self.contact = ContactParams()
-        for key in ("k_n", "c_n", "k_t", "mu", "k_s", "c_s"):
+        for key in CONTACT_KEYS:
             setattr(self.contact, key, wp.zeros(n, dtype=float, device=dev))
         self.contact.vessel = wp.zeros(n, dtype=wp.int32, device=dev)
         self.contact.vessel_center = wp.vec3(s.vessel_center_x, s.vessel_center_y,
@@ -131,7 +128,8 @@ class BatchedTwin:
         if cfg.layered:  # shell fraction per tet, stored once like Dm^-1
             w = shell_weights(mesh.nodes, mesh.tets, cfg.material.shell_thickness)[self.tet_order]
             self.tet_shell = wp.array(w.astype(np.float32), dtype=float, device=dev)
-            self.env_alpha, self.env_shell_ratio = (wp.zeros(n, dtype=float, device=dev) for _ in range(2))
+            for key in LAYERED_KEYS:  # env_alpha, env_shell_ratio: read by the layered kernel
+                setattr(self, f"env_{key}", wp.zeros(n, dtype=float, device=dev))
         self.set_env_params(env_params or {})
         self._pose = np.tile(np.eye(4), (n, 1, 1))
         self.frame = 0
@@ -146,47 +144,48 @@ class BatchedTwin:
 
     # ---- parameters and state -------------------------------------------------------------
     def set_env_params(self, params: dict[str, np.ndarray]) -> None:
-        """Per-env E, nu, k_n, c_n, k_t, mu, k_s, c_s, vessel (scalars broadcast); others from cfg.
-
-        With the layered kernel (cfg.layered) also alpha and shell_ratio (EXTRA_ENV_KEYS)."""
-        keys = ENV_PARAM_KEYS + EXTRA_ENV_KEYS
+        """Per-env values of the registry's parameters (twin.parameters; scalars broadcast) and the
+        vessel switch; a key left out takes the config's value. Scope "layered" keys (alpha,
+        shell_ratio) may differ from the config only with the layered kernel (cfg.layered)."""
+        keys = (*per_env_keys(), "vessel")
         unknown = set(params) - set(keys)
         if unknown:
             raise ValueError(f"unknown env parameter(s) {sorted(unknown)}: use {keys}")
-        extras = self._extra_params(params)
-        c, m = self.cfg.contact, self.cfg.material
-        defaults = {"E": m.E, "nu": m.nu, "k_n": c.k_n, "c_n": c.c_n, "k_t": c.k_t, "mu": c.mu,
-                    "k_s": c.k_s, "c_s": c.c_s, "vessel": float(c.vessel)}
+        cfg, m = self.cfg, self.cfg.material
         vals = {}
-        for key, default in defaults.items():
-            a = np.asarray(params.get(key, default), np.float64)
-            if a.ndim > 1 or a.size not in (1, self.n_envs):
-                raise ValueError(f"env parameter {key}: need a scalar or {self.n_envs} values, "
-                                 f"got shape {a.shape}")
-            a = np.broadcast_to(a.reshape(-1), (self.n_envs,))
-            if not np.all(np.isfinite(a)):
-                raise ValueError(f"env parameter {key}: values must be finite, got {a}")
-            vals[key] = a
+        for key in ENV_KEYS:
+            vals[key] = self._env_values(key, params.get(key, by_env_key(key).default(cfg)))
+        vals["vessel"] = self._env_values("vessel", params.get("vessel", float(cfg.contact.vessel)))
         if np.any(vals["E"] <= 0) or np.any((vals["nu"] <= 0) | (vals["nu"] >= 0.5)):
             raise ValueError(f"env parameters: need E > 0 and 0 < nu < 0.5, got E={vals['E']}, "
                              f"nu={vals['nu']}")
+        extras = self._layered_params(params)
         mu, lam = lame_parameters(vals["E"], vals["nu"], m.lame)
         self.env_mu.assign(mu.astype(np.float32))
         self.env_lam.assign(lam.astype(np.float32))
-        for key in ("k_n", "c_n", "k_t", "mu", "k_s", "c_s"):
+        for key in CONTACT_KEYS:
             getattr(self.contact, key).assign(vals[key].astype(np.float32))
         self.contact.vessel.assign((vals["vessel"] != 0).astype(np.int32))
-        if self.cfg.layered:
-            self.env_alpha.assign(extras["alpha"].astype(np.float32))
-            self.env_shell_ratio.assign(extras["shell_ratio"].astype(np.float32))
+        if cfg.layered:
+            for key, values in extras.items():
+                getattr(self, f"env_{key}").assign(values.astype(np.float32))
             vals.update(extras)
         self.env_params = vals
 
-    def _extra_params(self, params: dict) -> dict[str, np.ndarray]:
-        """alpha and shell_ratio per env; without the layered kernel only the config's values are allowed."""
-        defaults = {"alpha": self.cfg.damping.alpha, "shell_ratio": self.cfg.material.shell_ratio}
+    def _env_values(self, key: str, value) -> np.ndarray:
+        a = np.asarray(value, np.float64)
+        if a.ndim > 1 or a.size not in (1, self.n_envs):
+            raise ValueError(f"env parameter {key}: need a scalar or {self.n_envs} values, got shape {a.shape}")
+        a = np.broadcast_to(a.reshape(-1), (self.n_envs,))
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"env parameter {key}: values must be finite, got {a}")
+        return a
+
+    def _layered_params(self, params: dict) -> dict[str, np.ndarray]:
+        """Scope "layered" parameters per env; without the layered kernel only the config's values are allowed."""
         out = {}
-        for key, default in defaults.items():
+        for key in LAYERED_KEYS:
+            default = by_env_key(key).default(self.cfg)
             a = np.asarray(params.get(key, default), np.float64).reshape(-1)
             if a.size not in (1, self.n_envs) or not np.all(np.isfinite(a)) or np.any(a < 0):
                 raise ValueError(f"env parameter {key}: need one finite value >= 0 or {self.n_envs} "

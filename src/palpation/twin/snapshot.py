@@ -2,11 +2,11 @@
 
 `run_batch` records fixed frame windows; the reference calibration instead stops a slide on the
 first frame whose projected vessel centreline comes within 55 px of the marker centroid (SPEC §6.2)
-and reads node heights there. This loop reads the node positions every frame (markers are
-projected in numpy, as the trigger needs them on the host anyway), asks `stop` which active envs
-are done, and keeps their markers, nodes and pose. An env also stops at its `last_frame`; a
-finished schedule holds its last pose, so `last_frame` may lie past the trajectory's end (the
-reference caps a triggered slide at 400 frames while the slide itself has 398).
+and reads node heights there. As runner.ScheduledBatch steps the schedule, this loop reads the node
+positions every frame (markers are projected in numpy, as the trigger needs them on the host anyway),
+asks `stop` which active envs are done, and keeps their markers, nodes and pose. An env also stops at
+its `last_frame`; a finished schedule holds its last pose, so `last_frame` may lie past the
+trajectory's end (the reference caps a triggered slide at 400 frames while the slide itself has 398).
 """
 
 from __future__ import annotations
@@ -18,12 +18,10 @@ from typing import Callable
 import numpy as np
 import warp as wp
 
-from palpation.progress import bar
 from palpation.twin.config import TwinConfig
 from palpation.twin.markers import MarkerBinding, bind_markers, project_markers_np
 from palpation.twin.mesh import SensorMesh
-from palpation.twin.runner import EnvRequest, env_params, plan_requests
-from palpation.twin.simulator import BatchedTwin
+from palpation.twin.runner import EnvRequest, ScheduledBatch, plan_requests
 
 # stop(frame, markers (n, 127, 2) px, T_BA (n, 4, 4)) -> (n,) bool: stop these envs at this frame
 StopRule = Callable[[int, np.ndarray, np.ndarray], np.ndarray]
@@ -65,15 +63,14 @@ def run_until(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest], sto
         schedule[k:, i] = t.T_BA[-1]
 
     start = time.perf_counter()
-    sim = BatchedTwin(mesh, n, cfg, env_params(reqs), device=device)
-    sim.reset(np.stack([t.T_BA0 for t in trajs]))
+    batch = ScheduledBatch(mesh, cfg, reqs, trajs, schedule, device)
+    sim = batch.sim
     out = Snapshots(frame=np.full(n, -1), markers=np.full((n, len(binding.node_ix), 2), np.nan),
                     nodes_A=np.full((n, mesh.n_nodes, 3), np.nan, np.float32),
                     T_BA=np.full((n, 4, 4), np.nan), failed=np.zeros(n, bool),
                     stopped_by_rule=np.zeros(n, bool), frames=0, wall_s=0.0)
     active = np.ones(n, bool)
-    for f in bar(range(n_frames), desc=f"twin x{n}", unit="frame", enabled=progress, leave=False):
-        sim.step_frame(schedule[f])
+    for f in batch.frames(progress=progress):
         bad = sim.failed() & active
         out.failed |= bad
         active &= ~bad
