@@ -20,6 +20,7 @@ from palpation.loop.effects import split
 from palpation.twin.config import TwinConfig
 from palpation.twin.markers import CameraBinding, ImageSimilarity, bind_markers_through, project_markers_np
 from palpation.twin.mesh import SensorMesh
+from palpation.twin.parameters import PARAMETERS
 from palpation.twin.runner import EnvRequest, ScheduledBatch, plan_requests
 from palpation.twin.trajectory import mount_offset, padded_schedule, with_mount
 
@@ -47,7 +48,7 @@ def loop_twin_config(cfg: TwinConfig, shell_thickness_m: float) -> TwinConfig:
     if not cfg.camera.is_identity or not cfg.mount.is_identity or cfg.markers.anchor != 0.0:
         raise ValueError("loop: twin.camera, twin.mount and twin.markers must be nominal; the loop sets them "
                          "per env (cam_*, mount_* and marker_anchor parameters)")
-    k_s = cfg.contact.k_s if cfg.contact.phantom_contact else 0.0  # off stays off until the loop adds it
+    k_s = cfg.contact.k_s if cfg.contact.phantom_contact else PARAMETERS["k_s"].off  # off until the loop adds it
     c = replace(cfg, contact=replace(cfg.contact, phantom_contact=True, k_s=k_s),
                 material=replace(cfg.material, shell_thickness=shell_thickness_m),
                 damping=replace(cfg.damping, per_env=True))
