@@ -3,7 +3,8 @@
 Every module that names a twin parameter reads it from here: `BatchedTwin.set_env_params` (which keys
 it takes per env and their config defaults), `runner.EnvRequest` (what a request may set), the
 calibration's search space (calibration.params) and the residual loop's parameters (loop.effects).
-Adding a per-env parameter is one entry below plus the kernel that reads it (docs/ARCHITECTURE.md).
+Adding a per-env parameter is one entry below, its config field (twin.config) and the kernel that
+reads it; an entry with a `LoopStep` is also a residual-loop effect (docs/ARCHITECTURE.md).
 
 An entry's value is in its `unit`; the config field holds value * scale (only the mount's dz, kept in
 mm, and the reference-unit aliases scale). Defaults are never restated: `default(cfg)` reads the
@@ -98,10 +99,10 @@ PARAMETERS: dict[str, TwinParameter] = {p.name: p for p in (
     TwinParameter("c_s", "N s/m^2", "contact", "c_s", "env", CONTACT_KERNEL, 0.0, 200.0, False,
                   "same form and range as c_n", needs="phantom"),
     TwinParameter("k_t", "N s/m", "contact", "k_t", "env", CONTACT_KERNEL, 0.0, 200.0, False,
-                  "viscous tangential stiffness; 200 already pins a slide's surface nodes", needs="contact",
+                  "viscous tangential stiffness, from none (the reference) up", needs="contact",
                   loop=LoopStep("friction", "friction", 20.0, nonneg=True)),
     TwinParameter("mu", "1", "contact", "mu", "env", CONTACT_KERNEL, 0.0, 1.5, False,
-                  "Coulomb friction of silicone, up to 1.5", needs="contact",
+                  "Coulomb coefficient, from none (the reference) to 1.5", needs="contact",
                   loop=LoopStep("friction", "friction", 0.5, nonneg=True)),
     TwinParameter("alpha", "N s/m", "damping", "alpha", "layered", "twin.elasticity (layered kernel damping)",
                   2.0e-3, 1.5, True, "0.1x to 75x the reference-equivalent 0.02 (SPEC §2.3)",
@@ -122,7 +123,7 @@ PARAMETERS: dict[str, TwinParameter] = {p.name: p for p in (
                   -60.0, 60.0, False, "principal point shift, about one marker spacing (55 px)",
                   loop=LoopStep("camera", "dy", 20.0)),
     TwinParameter("mount_dz_mm", "mm", "mount", "dz", "mount", "twin.trajectory (mount offset)",
-                  -1.5, 1.5, False, "depth offset, about half the 3 mm press", scale=1e-3,
+                  -1.5, 1.5, False, "depth offset of a hand-set mount, +-1.5 mm", scale=1e-3,
                   loop=LoopStep("mount", "dz", 0.5)),
     TwinParameter("mount_tilt_x_deg", "deg", "mount", "tilt_x_deg", "mount", "twin.trajectory (mount offset)",
                   -6.0, 6.0, False, "mounting tilt", loop=LoopStep("mount", "tilt_x", 2.0)),
