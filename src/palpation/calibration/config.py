@@ -14,7 +14,7 @@ from hydra.core.config_store import ConfigStore
 
 from palpation import paper
 from palpation.calibration.objective import ANGLE_SOURCES, GEOMETRIES, INTERACTIONS
-from palpation.calibration.params import REGISTRY, check_names
+from palpation.calibration.params import REGISTRY
 from palpation.calibration.search import ParamSpec
 
 
@@ -67,7 +67,8 @@ class CalibrationConfig:
         for p in self.params:
             low, high, log = p.low, p.high, p.log
             if None in (low, high, log):
-                check_names([p.name], "calibration.params")
+                if p.name not in REGISTRY:  # the wording of search.validate_space, which checks the rest
+                    raise ValueError(f"calibration.params: unknown parameter '{p.name}'; known: {sorted(REGISTRY)}")
                 entry = REGISTRY[p.name]
                 low, high = entry.low if low is None else low, entry.high if high is None else high
                 log = entry.log if log is None else log
