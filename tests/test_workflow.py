@@ -6,6 +6,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+import yaml
+from snakemake.exceptions import WorkflowError
+from snakemake.utils import validate
+
 from palpation.paths import REPO_ROOT
 from palpation.report.reproduction import job_stats
 
@@ -50,15 +55,46 @@ def test_dry_run_lists_the_whole_dag(tmp_path):
         assert f"rule {rule}:" in listing, f"{rule} has no job in the dry run's listing"
 
 
-def test_unknown_profile_is_a_clear_error(tmp_path):
+def failing_dry_run(tmp_path: Path, *args: str) -> str:
     work = tmp_path / "wd"
     work.mkdir()
     for name in ("Snakefile", "workflow", "conf", "data"):
         os.symlink(REPO_ROOT / name, work / name)
-    out = subprocess.run(SNAKEMAKE + ["--cores", "1", "-n", "--config", "profile=nope"], cwd=work,
-                         capture_output=True, text=True, timeout=300)
+    out = subprocess.run(SNAKEMAKE + ["--cores", "1", "-n", *args], cwd=work, capture_output=True, text=True,
+                         timeout=300)
     assert out.returncode != 0
-    assert "unknown profile 'nope'" in out.stdout + out.stderr
+    return out.stdout + out.stderr
+
+
+def test_unknown_profile_is_a_clear_error(tmp_path):
+    assert "unknown profile 'nope'" in failing_dry_run(tmp_path, "--config", "profile=nope")
+
+
+def test_config_typo_fails_at_dag_build(tmp_path):
+    """A misspelt key of the profile config stops the DAG build with one line naming it and the schema."""
+    text = failing_dry_run(tmp_path, "--config", "dataset={n_pair: 3}")
+    line = next(line for line in text.splitlines() if "n_pair" in line)
+    assert "conf/workflow/quick.yaml" in line and "at key 'dataset'" in line
+    assert "workflow/schemas/config.schema.yaml" in line
+
+
+def test_profile_configs_match_the_schema():
+    """Every profile's config is valid; the schema fills in the optional keys' defaults (their one home)."""
+    schema = str(REPO_ROOT / "workflow" / "schemas" / "config.schema.yaml")
+    configs = {p.stem: yaml.safe_load(p.read_text()) for p in (REPO_ROOT / "conf" / "workflow").glob("*.yaml")}
+    assert sorted(configs) == ["paper", "quick", "tiny"]
+    for cfg in configs.values():
+        validate(cfg, schema)
+        assert cfg["maps"] == {"sim_source": "test"} and cfg["loop"]["twin"] == ""
+    assert configs["tiny"]["train"]["twin_ablation"] == {"experiments": ["A-to-B"], "seeds": []}
+    assert configs["tiny"]["train"]["ablation"] == {"experiment": "A-to-B", "clip_lens": [], "seeds": [0, 1, 2]}
+    with pytest.raises(WorkflowError, match="'seed' is a required property"):
+        validate({**configs["quick"], "dataset": {"n_pairs": 2, "recentre_k_n": False}}, schema)
+
+
+def test_lint_passes(tmp_path):
+    """`snakemake --lint` finds nothing (CI runs it too, .ci/run)."""
+    snakemake(tmp_path, "--lint")
 
 
 def test_slurm_profile_dry_run(tmp_path):

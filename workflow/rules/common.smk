@@ -1,30 +1,174 @@
-# Shared settings: the active profile's workflow config and helpers for calling Hydra apps.
+# Shared settings and every helper function of the rule files (rule files hold rules and the constants
+# of their own stage, and read nothing from each other but `rules.<name>.output`). Every app rule passes
+# params rule=<its name> and py=PY, and names conda: CONDA_ENV.
+#   config      conf/workflow/<profile>.yaml, --config on top, checked against workflow/schemas/
+#   conf/       experiments and dataset files (palpation.experiments), run folders (palpation.report.runs)
+import re
 import sys
-
-import yaml
 from pathlib import Path
 
+from snakemake.exceptions import WorkflowError
+from snakemake.utils import validate
+from snakemake_interface_executor_plugins.settings import DeploymentMethod
+
 from palpation.confdeps import conf_files
+from palpation.experiments import dataset_files, experiments
+from palpation.report.runs import run_dir
+
+
+def config_error(message, profile_file):
+    """Snakemake's schema error in one line: what is wrong, at which key, where the keys are listed."""
+    lines = message.splitlines()  # "Error validating config file.", "ValidationError: ...", "On instance[..]:"
+    what = lines[1].removeprefix("ValidationError: ")
+    if "is not of type" in what:
+        what += " (nested --config values arrive as strings: pass typed ones in a --configfile)"
+    path = next((line for line in lines if line.startswith("On instance")), "")
+    key = ".".join(re.findall(r"\['?([^]']+)'?\]", path))
+    at = f" at key '{key}'" if key else ""
+    schema = "workflow/schemas/config.schema.yaml"
+    return f"{profile_file} (or --config): {what}{at}; the keys and their defaults: {schema}"
+
 
 PROFILE = config.get("profile", "quick")
 _profile_file = Path("conf/workflow") / f"{PROFILE}.yaml"
 if not _profile_file.exists():
     raise ValueError(f"unknown profile '{PROFILE}': {_profile_file} does not exist")
-for _key, _value in yaml.safe_load(_profile_file.read_text()).items():
-    config.setdefault(_key, _value)  # command-line --config wins
 
-PY = f"{sys.executable} -m"  # the interpreter running Snakemake (venv or GPU node)
-REF = "data/reference"
-PHOTOS = f"{REF}/photos/flat-tip"
-VIDEOS = f"{REF}/videos"
+
+configfile: str(_profile_file)  # --config (and a profile's `config:`) wins, key by key
+
+
+try:
+    validate(config, "../schemas/config.schema.yaml")  # also fills in the schema's defaults
+except WorkflowError as e:
+    raise ValueError(config_error(str(e), _profile_file)) from None
+
+# Every rule runs in workflow/envs/palpation.yaml under `--sdm conda`; otherwise (the default) in the
+# interpreter running Snakemake (the venv, or a GPU node's environment).
+CONDA_ENV = "../envs/palpation.yaml"
+_CONDA = DeploymentMethod.CONDA in workflow.deployment_settings.deployment_method
+PY = "python -m" if _CONDA else f"{sys.executable} -m"
+
+PHOTOS = "data/reference/photos/flat-tip"
+VIDEOS = "data/reference/videos"
+GPU = 1 if config["device"] == "cuda" else 0  # resources: gpu, so that a profile can cap GPU jobs
+TWIN_ARGS = f"twin/mesh={config['twin_resolution']} twin.device={config['device']}"
+
+TRAIN = config["train"]
+EXPERIMENTS = experiments()  # conf/experiment/<name>.yaml: sets trained and tested on, model size
+TRAIN_DATA = dataset_files()  # conf/train.yaml data: sim, silicone, meat
+TRAIN_DIR = "results/train"
+TRAIN_REPORT = f"{TRAIN_DIR}/report"
+TRAIN_RUN = str(run_dir(TRAIN_DIR, "{exp}", "{clip_len}", "{seed}"))
+TWIN_ABL = TRAIN["twin_ablation"]
+TWIN_ABL_RUN = str(run_dir(f"{TRAIN_DIR}/twin_calibrated", "{exp}", "{clip_len}", "{seed}"))
+# the dataset-twin ablation's tables; empty where the profile skips it (no seeds)
+TWIN_ABLATION_FILES = (
+    [f"{TRAIN_REPORT}/twin_ablation.csv", f"{TRAIN_REPORT}/twin_ablation.md"] if TWIN_ABL["seeds"] else []
+)
+MAPS_CONFIGS = config["maps"].get("configs", TRAIN["experiments"])
 
 
 def hydra_dir(path):
     """Pin Hydra's run folder next to a rule's output so .hydra/config.yaml stays with it."""
     return f"hydra.run.dir={Path(path).parent} hydra.output_subdir=.hydra/{Path(path).stem}"
 
+
+def twin_mesh(resolution=None):
+    """The FEM mesh of rule `mesh` (twin.smk) at the profile's resolution."""
+    return expand(rules.mesh.output.mesh, resolution=resolution or config["twin_resolution"])[0]
+
+
+def fit_overrides(fit):
+    """Hydra overrides that load a fitted twin, <dir>/twin_fit/fitted.yaml, as config group twin_fit."""
+    return f"'hydra.searchpath=[file://{Path(fit).parents[1]}]' +twin_fit={Path(fit).stem}"
+
+
+def yaml_list(values):
+    return "[" + ",".join(str(v) for v in values) + "]"
+
+
+def runs_root(metrics):
+    """The root of training runs from one run's file, <root>/<exp>/L<n>/seed<s>/<file>."""
+    return Path(metrics).parents[3]
+
+
+def calibration_outputs(out):
+    return {
+        "fit": f"{out}/twin_fit/fitted.yaml",
+        "params": f"{out}/fitted_params.yaml",
+        "csv": f"{out}/calibration.csv",
+        "md": f"{out}/calibration.md",
+        "json": f"{out}/calibration.json",
+        "trials": f"{out}/trials.csv",
+        "fig4": report(f"{out}/fig4.png", caption="../report/calibration_fig4.rst", category="Calibration"),
+        "fig4_pdf": f"{out}/fig4.pdf",
+        "fig4_paper": f"{out}/fig4_paper.png",
+        "fig4_paper_pdf": f"{out}/fig4_paper.pdf",
+        "history": report(
+            f"{out}/history.png", caption="../report/calibration_history.rst", category="Calibration"
+        ),
+        "history_pdf": f"{out}/history.pdf",
+    }
+
+
+def train_data(wildcards, sim=TRAIN_DATA["sim"]):
+    return {name: sim if name == "sim" else TRAIN_DATA[name] for name in EXPERIMENTS[wildcards.exp].datasets}
+
+
+def train_inputs(wildcards, sim=TRAIN_DATA["sim"]):
+    """The datasets and the conf/ files of this configuration (experiment overlay, model, recipe)."""
+    choices = {"experiment": wildcards.exp, "model": EXPERIMENTS[wildcards.exp].model, "recipe": TRAIN["recipe"]}
+    return {**train_data(wildcards, sim), "conf": conf_files("train", choices)}
+
+
+def train_overrides(wildcards, sim=TRAIN_DATA["sim"]):
+    """Dataset paths and the profile's size knobs for this configuration's model, as Hydra overrides."""
+    data = [f"data.{k}={v}" for k, v in train_data(wildcards, sim).items()]
+    sizes = TRAIN["sizes"].get(EXPERIMENTS[wildcards.exp].model) or {}
+    knobs = [f"train.{k}={v}" for k, v in sizes.items() if v is not None]
+    return " ".join(data + knobs + [f"recipe={TRAIN['recipe']}"])
+
+
+def sweep_runs(name):
+    """`name` (metrics.json, scores.npz) of every run the report reads."""
+    runs = expand(f"{TRAIN_RUN}/{name}", exp=TRAIN["experiments"], clip_len=TRAIN["clip_len"], seed=TRAIN["seeds"])
+    abl = TRAIN["ablation"]
+    if abl["clip_lens"]:
+        runs += expand(f"{TRAIN_RUN}/{name}", exp=abl["experiment"], clip_len=abl["clip_lens"], seed=abl["seeds"])
+    return sorted(set(runs))
+
+
+def twin_ablation_runs(twin_run):
+    return expand(f"{twin_run}/metrics.json", exp=TWIN_ABL["experiments"], clip_len=TRAIN["clip_len"],
+                  seed=TWIN_ABL["seeds"])
+
+
+def maps_runs(name, configs=MAPS_CONFIGS):
+    """`name` of every seed of the mapped configurations (the app picks the best of them)."""
+    return expand(f"{TRAIN_RUN}/{name}", exp=configs, clip_len=TRAIN["clip_len"], seed=TRAIN["seeds"])
+
+
+def maps_datasets():
+    """The test sets of the mapped configurations, sorted."""
+    return sorted({EXPERIMENTS[c].test_on for c in MAPS_CONFIGS})
+
+
+def maps_inputs(wildcards):
+    inputs = {"metrics": maps_runs("metrics.json"), "scores": maps_runs("scores.npz")}
+    inputs.update({ds: TRAIN_DATA[ds] for ds in maps_datasets()})
+    inputs["conf"] = conf_files("vessel_maps")
+    tested_on_sim = [c for c in MAPS_CONFIGS if EXPERIMENTS[c].test_on == "sim"]  # A-to-A
+    if tested_on_sim and config["maps"]["sim_source"] == "slide":
+        inputs["checkpoints"] = maps_runs("checkpoint.pt", tested_on_sim)
+        inputs["slide"] = rules.simulate_vessel_slide.output.manifest
+    return inputs
+
+
 # Every job knows its profile (MLflow tags runs with it) and writes no MLflow artefacts into ./mlruns.
-# The prefix is formatted once, not per job, so each shell command starts with `SNAKEMAKE_RULE={rule}`
-# itself: MLflow tags every run with its rule (palpation.tracking, the job key of a rerun).
+# The prefix is formatted once, not per job, so each shell command starts with `SNAKEMAKE_RULE={params.rule}`
+# itself: MLflow tags every run with its rule (palpation.tracking, the job key of a rerun). Each rule passes
+# its own name as params.rule and the interpreter as params.py, since `snakemake --lint` flags `{rule}` and
+# globals in shell commands.
 # Hydra rules declare the conf/ files their app composes (conf_files) so that an edit reruns exactly them.
 shell.prefix(f"set -euo pipefail; export PALPATION_PROFILE={PROFILE}; ")

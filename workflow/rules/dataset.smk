@@ -1,29 +1,33 @@
 # The domain-randomised Sim dataset (SPEC §7, conf/dataset/sim.yaml): per trial heading, k_n, c_n drawn from one seeded
 # stream; even files over the vessel, odd without. Split 70/15/15 by sorted id at load time.
-DATASET = config.get("dataset", {})
+DATASET = config["dataset"]
 
 
 rule simulate_dataset:
     input:
-        mesh=TWIN_MESH,
+        mesh=twin_mesh(),
         conf=conf_files("simulate", {"twin/mesh": config["twin_resolution"]}),
-        fit=LOOP_FIT,  # the residual loop's final twin sets every parameter the draws leave alone
+        fit=rules.loop.output.fit,  # the residual loop's final twin sets every parameter the draws leave alone
     output:
         manifest="results/sim/dataset/manifest.json",
     params:
+        rule="simulate_dataset",
+        py=PY,
         hydra=lambda wildcards, output: hydra_dir(output.manifest),
         outdir=lambda wildcards, output: Path(output.manifest).parent,
         twin=TWIN_ARGS,
-        n_pairs=DATASET.get("n_pairs", 250),
-        seed=DATASET.get("seed", 42),
-        recentre=str(DATASET.get("recentre_k_n", False)).lower(),
-        fit_args=LOOP_FIT_ARGS,
+        n_pairs=DATASET["n_pairs"],
+        seed=DATASET["seed"],
+        recentre=str(DATASET["recentre_k_n"]).lower(),
+        fit_args=lambda wildcards, input: fit_overrides(input.fit),
     resources:
         gpu=GPU,
     log:
         "results/logs/sim/simulate_dataset.log",
+    conda:
+        CONDA_ENV
     shell:
-        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.simulate set=randomised"
+        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.simulate set=randomised"
         " n_pairs={params.n_pairs} seed={params.seed}"
         " dataset.recentre_k_n={params.recentre}"
         " {params.twin} {params.fit_args} mesh={input.mesh} out.dir={params.outdir}"
@@ -34,12 +38,12 @@ rule simulate_dataset:
 # the paper trains on, so that what the loop's twin does to sim-to-real transfer is measured.
 use rule simulate_dataset as simulate_dataset_calibrated with:
     input:
-        mesh=TWIN_MESH,
+        mesh=twin_mesh(),
         conf=rules.simulate_dataset.input.conf,
-        fit=TWIN_FIT,
+        fit=rules.calibrate.output.fit,
     output:
         manifest="results/sim/dataset_calibrated/manifest.json",
     params:
-        fit_args=TWIN_FIT_ARGS,
+        rule="simulate_dataset_calibrated",
     log:
         "results/logs/sim/simulate_dataset_calibrated.log",

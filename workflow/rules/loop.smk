@@ -1,28 +1,21 @@
 # Issue 5: close the loop with measured data (residual -> missing effect -> add it -> error before and after).
-# Needs common.smk (PY, hydra_dir, PROFILE, config: twin_resolution, device, optional loop.preset/.twin),
-# twin.smk (rule mesh) and photos.smk (rule measured_photos).
+# Needs common.smk (hydra_dir, twin_mesh, config: loop, twin_resolution, device), twin.smk (rule mesh)
+# and photos.smk (rule measured_photos).
 #
-# The final twin (LOOP_FIT) is a config-group option in package `twin`, the same mechanism as the
-# calibration's TWIN_FIT: a dataset rule reads it by declaring `fit=LOOP_FIT` as an input and adding
-# LOOP_FIT_ARGS to its Hydra overrides (instead of TWIN_FIT_ARGS; the loop's file also holds E).
+# The final twin (output `fit`) is a config-group option in package `twin`, the same mechanism as the
+# calibration's: a dataset rule reads it by declaring `fit=rules.loop.output.fit` as an input and adding
+# fit_overrides(input.fit) to its Hydra overrides (the loop's file also holds E).
 # The Optuna studies (results/loop/study.db, results/loop/selftest/study.db) are deliberately not
 # outputs: Snakemake would delete them before a rerun, and they let a killed loop resume.
 
 LOOP_DIR = "results/loop"
-LOOP_PRESET = config.get("loop", {}).get("preset", "quick" if PROFILE == "quick" else "paper")
 # loop.twin: extra twin overrides, e.g. a smaller step for a stiff shell on the reference mesh
 # ("twin.integrator.dt=5e-6 twin.integrator.substeps=248"); the final twin_fit records dt and substeps
-LOOP_TWIN = (
-    f"twin/mesh={config['twin_resolution']} twin.device={config['device']} "
-    + config.get("loop", {}).get("twin", "")
-).strip()
-LOOP_MESH = f"results/twin/mesh_{config['twin_resolution']}.npz"
-LOOP_GPU = 1 if config["device"] == "cuda" else 0
-LOOP_CONF = conf_files("loop", {"loop": LOOP_PRESET, "twin/mesh": config["twin_resolution"]})
-LOOP_FIT = f"{LOOP_DIR}/twin_fit/fitted.yaml"
-LOOP_FIT_ARGS = f"'hydra.searchpath=[file://{LOOP_DIR}]' +twin_fit=fitted"
+LOOP_TWIN = f"{TWIN_ARGS} {config['loop']['twin']}".strip()
+LOOP_CONF = conf_files("loop", {"loop": config["loop"]["preset"], "twin/mesh": config["twin_resolution"]})
 LOOP_SHELL = (
-    "SNAKEMAKE_RULE={rule} {params.py} palpation.apps.loop mode={params.mode} loop={params.preset} {params.twin}"
+    "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.loop"
+    " mode={params.mode} loop={params.preset} {params.twin}"
     " measured={params.measured} mesh={input.mesh} out.dir={params.out} {params.hydra} > {log} 2>&1"
 )
 
@@ -30,13 +23,13 @@ LOOP_SHELL = (
 rule loop:
     input:
         measured=rules.measured_photos.output.npz,
-        mesh=LOOP_MESH,
+        mesh=twin_mesh(),
         conf=LOOP_CONF,
     output:
         report=f"{LOOP_DIR}/report.md",
         csv=f"{LOOP_DIR}/loop_real.csv",
         rounds=f"{LOOP_DIR}/rounds.json",
-        fit=LOOP_FIT,
+        fit=f"{LOOP_DIR}/twin_fit/fitted.yaml",
         params=f"{LOOP_DIR}/fitted_params.yaml",
         rounds_png=report(f"{LOOP_DIR}/rounds.png", caption="../report/loop_rounds.rst", category="Residual loop"),
         rounds_pdf=f"{LOOP_DIR}/rounds.pdf",
@@ -44,17 +37,20 @@ rule loop:
         modes_pdf=f"{LOOP_DIR}/modes.pdf",
         residuals=directory(f"{LOOP_DIR}/residuals"),
     params:
+        rule="loop",
+        py=PY,
         mode="real",
-        preset=LOOP_PRESET,
+        preset=config["loop"]["preset"],
         twin=LOOP_TWIN,
         measured=lambda wildcards, input: input.measured[: -len(".npz")],
         out=lambda wildcards, output: Path(output.report).parent,
         hydra=lambda wildcards, output: hydra_dir(output.report),
-        py=PY,
     resources:
-        gpu=LOOP_GPU,
+        gpu=GPU,
     log:
         "results/logs/loop/loop.log",
+    conda:
+        CONDA_ENV
     shell:
         LOOP_SHELL
 
@@ -63,7 +59,7 @@ rule loop:
 rule loop_selftest:
     input:
         measured=rules.measured_photos.output.npz,
-        mesh=LOOP_MESH,
+        mesh=twin_mesh(),
         conf=LOOP_CONF,
     output:
         csv=f"{LOOP_DIR}/loop_selftest.csv",
@@ -71,16 +67,19 @@ rule loop_selftest:
         json=f"{LOOP_DIR}/selftest.json",
         sets=directory(f"{LOOP_DIR}/selftest/sets"),
     params:
+        rule="loop_selftest",
+        py=PY,
         mode="selftest",
-        preset=LOOP_PRESET,
+        preset=config["loop"]["preset"],
         twin=LOOP_TWIN,
         measured=lambda wildcards, input: input.measured[: -len(".npz")],
         out=lambda wildcards, output: Path(output.csv).parent,
         hydra=lambda wildcards, output: hydra_dir(output.csv),
-        py=PY,
     resources:
-        gpu=LOOP_GPU,
+        gpu=GPU,
     log:
         "results/logs/loop/loop_selftest.log",
+    conda:
+        CONDA_ENV
     shell:
         LOOP_SHELL

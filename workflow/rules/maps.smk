@@ -1,34 +1,11 @@
 # Top-view vessel maps from the best-of-five runs: operating points, Table 4 lower half and Fig. 7 (SPEC §12).
-# Needs common.smk (PY, PROFILE, hydra_dir) and train.smk (TRAIN, TRAIN_RUN, TRAIN_DIR, TRAIN_DATA,
-# EXPERIMENTS, yaml_list); include it after both. The profile's optional `maps:` mapping:
+# Needs common.smk (maps_inputs, maps_datasets, MAPS_CONFIGS, TRAIN_DATA, hydra_dir), simulate.smk (rule
+# simulate_vessel_slide) and train.smk (rule train). The profile's optional `maps:` mapping
+# (workflow/schemas/config.schema.yaml):
 #   configs      configurations to map (default: train.experiments)
 #   sim_source   test (the Sim test windows) | slide (rescore the dedicated vessel slide densely)
 # The best seed is known only after training, so the rule takes every seed's metrics and scores and
 # the app picks the best-of-five (highest test AP, AUROC breaks ties; SPEC §11).
-
-MAPS = config.get("maps", {})
-MAPS_DIR = "results/maps"
-MAPS_CONFIGS = MAPS.get("configs", TRAIN.get("experiments", list(EXPERIMENTS)))
-MAPS_SIM_SOURCE = MAPS.get("sim_source", "test")
-MAPS_SLIDE = "results/twin/vessel_slide/manifest.json"  # rule simulate_vessel_slide
-MAPS_TEST_SET = {"A-to-A": "sim", "A-to-B": "silicone", "A-to-C": "meat", "C-to-B": "silicone"}
-MAPS_SEEDS = TRAIN.get("seeds", [0, 1, 2, 3, 4])
-MAPS_DATASETS = sorted({MAPS_TEST_SET[c] for c in MAPS_CONFIGS})
-
-
-def maps_runs(name, configs=MAPS_CONFIGS):
-    """`name` of every seed of the mapped configurations (the app picks the best of them)."""
-    return expand(f"{TRAIN_RUN}/{name}", exp=configs, clip_len=TRAIN.get("clip_len", 5), seed=MAPS_SEEDS)
-
-
-def maps_inputs(wildcards):
-    inputs = {"metrics": maps_runs("metrics.json"), "scores": maps_runs("scores.npz")}
-    inputs.update({ds: TRAIN_DATA[ds] for ds in MAPS_DATASETS})
-    inputs["conf"] = conf_files("vessel_maps")
-    if "A-to-A" in MAPS_CONFIGS and MAPS_SIM_SOURCE == "slide":
-        inputs["checkpoints"] = maps_runs("checkpoint.pt", ["A-to-A"])
-        inputs["slide"] = MAPS_SLIDE
-    return inputs
 
 
 rule vessel_maps:
@@ -48,18 +25,23 @@ rule vessel_maps:
     log:
         "results/logs/maps/vessel_maps.log",
     params:
+        rule="vessel_maps",
+        py=PY,
         configs=yaml_list(MAPS_CONFIGS),
-        seeds=yaml_list(MAPS_SEEDS),
-        clip_len=TRAIN.get("clip_len", 5),
-        runs_root=TRAIN_DIR,
-        data=" ".join(f"data.{ds}={TRAIN_DATA[ds]}" for ds in MAPS_DATASETS),
-        sim=f"sim.source={MAPS_SIM_SOURCE} sim.slide_manifest={MAPS_SLIDE}",
-        out_dir=MAPS_DIR,
+        seeds=yaml_list(TRAIN["seeds"]),
+        clip_len=TRAIN["clip_len"],
+        runs_root=lambda wildcards, input: runs_root(input.metrics[0]),
+        data=" ".join(f"data.{ds}={TRAIN_DATA[ds]}" for ds in maps_datasets()),
+        sim=f"sim.source={config['maps']['sim_source']}"
+        f" sim.slide_manifest={rules.simulate_vessel_slide.output.manifest}",
+        out_dir=lambda wildcards, output: Path(output.table).parent,
         hydra=lambda wildcards, output: hydra_dir(output.table),
         profile=PROFILE,
-        device=config.get("device", "cpu"),
+        device=config["device"],
+    conda:
+        CONDA_ENV
     shell:
-        "PALPATION_PROFILE={params.profile} SNAKEMAKE_RULE={rule} {PY} palpation.apps.vessel_maps"
+        "PALPATION_PROFILE={params.profile} SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.vessel_maps"
         " profile={params.profile} 'configs={params.configs}' runs.root={params.runs_root}"
         " 'runs.seeds={params.seeds}' clip_len={params.clip_len} {params.data} {params.sim}"
         " device={params.device} out_dir={params.out_dir} {params.hydra} > {log} 2>&1"

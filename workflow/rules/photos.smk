@@ -28,13 +28,16 @@ rule measured_photos:
         ),
         pdf="results/data/photos/markers_overlay.pdf",
     params:
+        rule="measured_photos",
         hydra=lambda wildcards, output: hydra_dir(output.npz),
         outdir=lambda wildcards, output: Path(output.npz).parent,
-        photos_dir=PHOTOS,
         py=PY,
+        photos_dir=lambda wildcards, input: Path(input.photos[0]).parent,
     log:
         "results/logs/data/measured_photos.log",
+    conda:
+        CONDA_ENV
     shell:
-        "SNAKEMAKE_RULE={rule} {params.py} palpation.apps.photos"
+        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.photos"
         " photos_dir={params.photos_dir} out.dir={params.outdir}"
         " {params.hydra} > {log} 2>&1"

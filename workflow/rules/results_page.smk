@@ -1,8 +1,8 @@
 # The results page (issue 8): every table of the run beside the paper's numbers -> results/README.md.
-# Needs common.smk (PY, PROFILE, hydra_dir) and the rule files whose tables it reads; include it after
-# maps.smk. The inputs are the tables this profile produces; the twin ablation joins when a rule file
-# defines a non-empty TWIN_ABLATION_FILES list. bench/reproduction.json is read if present but is no
-# input: onsuccess writes it after the run, so the page shows the previous completed run's timing.
+# Needs common.smk (PROFILE, hydra_dir, TWIN_ABLATION_FILES) and the rule files whose tables it reads;
+# include it after maps.smk. The inputs are the tables this profile produces; the twin ablation joins
+# where the profile runs it (TWIN_ABLATION_FILES not empty). bench/reproduction.json is read if present
+# but is no input: onsuccess writes it after the run, so the page shows the previous completed run's timing.
 
 
 rule results_page:
@@ -11,12 +11,12 @@ rule results_page:
         calibration=rules.calibrate.output.csv,
         loop=rules.loop.output.csv,
         loop_report=rules.loop.output.report,
-        train_report=TRAIN_REPORT_FILES,  # seed sweep, Table 4 upper half, Fig. 6 (+ Table 3 if ablated)
+        train_report=rules.train_report.output,  # seed sweep, Table 4 upper half, Fig. 6 (+ Table 3 if ablated)
         maps=rules.vessel_maps.output.table,
         maps_photo=rules.vessel_maps.output.photo,
         maps_json=rules.vessel_maps.output.json,
         render=rules.render_twin.output.png,  # listed among the figures
-        twin_ablation=TWIN_ABLATION_FILES,  # train.smk; empty where the profile skips the ablation
+        twin_ablation=TWIN_ABLATION_FILES,  # common.smk; empty where the profile skips the ablation
         conf=conf_files("results_page"),
         explanations="conf/results_page/explanations.yaml",
         folders="conf/results_page/folders.yaml",
@@ -25,9 +25,14 @@ rule results_page:
     log:
         "results/logs/results_page.log",
     params:
+        rule="results_page",
+        py=PY,
         root=lambda wildcards, output: Path(output.page).parent,
         hydra=lambda wildcards, output: hydra_dir(output.page),
         profile=PROFILE,
+    conda:
+        CONDA_ENV
     shell:
-        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.results_page root={params.root} out={output.page} profile={params.profile}"
+        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.results_page"
+        " root={params.root} out={output.page} profile={params.profile}"
         " explanations={input.explanations} folders={input.folders} {params.hydra} > {log} 2>&1"

@@ -1,6 +1,6 @@
 # The real Silicone set rebuilt from the annotation video (SPEC §13.4), and the cross-check of its
 # labels against the A-to-B prediction viewer's Ground Truth panel (SPEC §13.5).
-# Needs common.smk (PY, PHOTOS, VIDEOS, hydra_dir).
+# Needs common.smk (PHOTOS, VIDEOS, hydra_dir).
 
 
 rule silicone_set:
@@ -14,12 +14,16 @@ rule silicone_set:
         png=report("results/data/silicone/silicone_overview.png", caption="../report/silicone_overview.rst", category="Real data"),
         pdf="results/data/silicone/silicone_overview.pdf",
     params:
+        rule="silicone_set",
+        py=PY,
         hydra=lambda wildcards, output: hydra_dir(output.npz),
         figure=lambda wildcards, output: output.png[: -len(".png")],
     log:
         "results/logs/data/silicone_set.log",
+    conda:
+        CONDA_ENV
     shell:
-        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.silicone task=set"
+        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.silicone task=set"
         " video={input.video} template_photo={input.rest_photo}"
         " out.npz={output.npz} out.json={output.json} out.figure={params.figure}"
         " {params.hydra} > {log} 2>&1"
@@ -33,10 +37,14 @@ rule silicone_check:
     output:
         json="results/data/silicone/label_agreement.json",
     params:
+        rule="silicone_check",
+        py=PY,
         hydra=lambda wildcards, output: hydra_dir(output.json),
     log:
         "results/logs/data/silicone_check.log",
+    conda:
+        CONDA_ENV
     shell:
-        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.silicone task=check"
+        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.silicone task=check"
         " out.npz={input.npz} prediction_video={input.video}"
         " out.agreement={output.json} {params.hydra} > {log} 2>&1"

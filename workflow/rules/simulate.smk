@@ -1,23 +1,22 @@
 # Twin trajectories (palpation.apps.simulate), their rendering and the twin benchmark.
-# Needs common.smk (PY, hydra_dir, config: twin_resolution, device) and twin.smk (rule mesh).
+# Needs common.smk (hydra_dir, twin_mesh, TWIN_ARGS, GPU) and twin.smk (rule mesh).
 # Output format: docs/sim_format.md.
 
 CANONICAL = ["press", "twist_z", "twist_x", "slide"]
-TWIN_MESH = f"results/twin/mesh_{config['twin_resolution']}.npz"
-TWIN_ARGS = f"twin/mesh={config['twin_resolution']} twin.device={config['device']}"
-GPU = 1 if config["device"] == "cuda" else 0
 # conf/ files of palpation.apps.simulate; the dataset group (draw options) matters to set=randomised only
 SIM_CONF = conf_files("simulate", {"twin/mesh": config["twin_resolution"], "dataset": None})
 
 
 rule simulate_canonical:
     input:
-        mesh=TWIN_MESH,
+        mesh=twin_mesh(),
         conf=SIM_CONF,
     output:
         manifest="results/twin/canonical/manifest.json",
         npz=expand("results/twin/canonical/{kind}.npz", kind=CANONICAL),
     params:
+        rule="simulate_canonical",
+        py=PY,
         hydra=lambda wildcards, output: hydra_dir(output.manifest),
         outdir=lambda wildcards, output: Path(output.manifest).parent,
         twin=TWIN_ARGS,
@@ -25,19 +24,24 @@ rule simulate_canonical:
         gpu=GPU,
     log:
         "results/logs/twin/simulate_canonical.log",
+    conda:
+        CONDA_ENV
     shell:
-        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.simulate set=canonical {params.twin} mesh={input.mesh}"
+        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.simulate"
+        " set=canonical {params.twin} mesh={input.mesh}"
         " out.dir={params.outdir} {params.hydra} > {log} 2>&1"
 
 
 rule simulate_vessel_slide:
     input:
-        mesh=TWIN_MESH,
+        mesh=twin_mesh(),
         conf=SIM_CONF,
     output:
         manifest="results/twin/vessel_slide/manifest.json",
         npz="results/twin/vessel_slide/vessel_slide.npz",
     params:
+        rule="simulate_vessel_slide",
+        py=PY,
         hydra=lambda wildcards, output: hydra_dir(output.manifest),
         outdir=lambda wildcards, output: Path(output.manifest).parent,
         twin=TWIN_ARGS,
@@ -45,8 +49,11 @@ rule simulate_vessel_slide:
         gpu=GPU,
     log:
         "results/logs/twin/simulate_vessel_slide.log",
+    conda:
+        CONDA_ENV
     shell:
-        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.simulate set=vessel_slide {params.twin} mesh={input.mesh}"
+        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.simulate"
+        " set=vessel_slide {params.twin} mesh={input.mesh}"
         " out.dir={params.outdir} {params.hydra} > {log} 2>&1"
 
 
@@ -62,20 +69,26 @@ rule render_twin:
             name=[f"canonical_{k}" for k in CANONICAL] + ["vessel_slide_vessel_slide"],
         ),
     params:
+        rule="render_twin",
+        py=PY,
         outdir=lambda wildcards, output: Path(output.png).parent,
     log:
         "results/logs/twin/render_twin.log",
+    conda:
+        CONDA_ENV
     shell:
-        "SNAKEMAKE_RULE={rule} {PY} palpation.twin.render --out {params.outdir} {input.canonical} {input.slide}"
+        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.twin.render"
+        " --out {params.outdir} {input.canonical} {input.slide}"
         " > {log} 2>&1"
 
 
 rule bench_twin:
     input:
-        meshes=expand("results/twin/mesh_{resolution}.npz", resolution=["coarse", "reference"]),
+        meshes=[twin_mesh(resolution) for resolution in ("coarse", "reference")],
     output:
         json="results/bench/twin.json",
     params:
+        py=PY,
         # CPU: ~20 s of timed frames per point, extrapolated to a full slide (recorded in the JSON)
         budget=20 if config["device"] == "cpu" else 120,
         device=config["device"],
@@ -84,6 +97,8 @@ rule bench_twin:
         gpu=GPU,
     log:
         "results/logs/bench/twin.log",
+    conda:
+        CONDA_ENV
     shell:
-        "{PY} palpation.twin.benchmark --device {params.device} --mesh-dir {params.mesh_dir}"
+        "{params.py} palpation.twin.benchmark --device {params.device} --mesh-dir {params.mesh_dir}"
         " --budget-s {params.budget} --out {output.json} > {log} 2>&1"

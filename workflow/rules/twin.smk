@@ -11,11 +11,15 @@ rule mesh:
     wildcard_constraints:
         resolution="[a-z]+",
     params:
+        rule="mesh",
+        py=PY,
         # one Hydra job log per resolution, not a shared results/twin/mesh.log
         hydra=lambda wildcards, output: hydra_dir(output.mesh)
         + f" hydra.job.name=mesh_{wildcards.resolution}",
     log:
         "results/logs/twin/mesh_{resolution}.log",
+    conda:
+        CONDA_ENV
     shell:
-        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.mesh twin/mesh={wildcards.resolution}"
+        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.mesh twin/mesh={wildcards.resolution}"
         " out.mesh={output.mesh} out.stats={output.stats} {params.hydra} > {log} 2>&1"
