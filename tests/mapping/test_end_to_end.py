@@ -9,7 +9,7 @@ from palpation.io import save_json, save_npz
 from palpation.mapping.pipeline import MapSettings, config_maps
 from palpation.mapping.sources import sim_source
 from palpation.mapping.stats import map_stats
-from palpation.mapping.table import COLUMNS
+from palpation.report.tables import MAPS_COLUMNS
 from palpation.metrics.classification import marker_metrics
 from palpation.paths import REPO_ROOT
 from palpation.report.runs import run_dir
@@ -29,7 +29,7 @@ def test_app_maps_a_synthetic_sim_run(sim_set, make_scores, tmp_path):
     entry = result["configs"]["A-to-A"]
     assert entry["run"]["seed"] == 1
     table = pd.read_csv(out / "table4_maps.csv")
-    assert list(table.columns) == list(COLUMNS)
+    assert list(table.columns) == list(MAPS_COLUMNS)
     row = table.iloc[0]
     assert row["threshold_rule"] == "precision>=0.9@3mm"
     assert 0.25 < row["threshold"] <= 0.9  # above every background score

@@ -122,7 +122,7 @@ rule train_report:
             f" 'ablation.seeds={yaml_list(TRAIN.get('ablation', {}).get('seeds', [0, 1, 2]))}'"
         ),
     shell:
-        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.report profile={params.profile} runs_root={params.runs_root}"
+        "SNAKEMAKE_RULE={rule} {PY} palpation.apps.train_tables profile={params.profile} runs_root={params.runs_root}"
         " out_dir={params.out_dir} 'experiments={params.experiments}' 'seeds={params.seeds}'"
         " clip_len={params.clip_len} {params.ablation} hydra.run.dir={params.out_dir} > {log} 2>&1"
 

@@ -20,16 +20,16 @@ import pandas as pd
 from omegaconf import DictConfig, OmegaConf
 
 from palpation import tracking
+from palpation.figures import maps as figures
 from palpation.io import atomic_path, save_json, save_npz, save_text
-from palpation.mapping import figures
 from palpation.mapping.pipeline import TEST_DATASET, MapSettings, config_maps
 from palpation.mapping.samples import load_scores
 from palpation.mapping.silicone_check import pose_check
 from palpation.mapping.silicone_poses import SweepLayout, direction_evidence, estimate_mirror
 from palpation.mapping.sources import meat_source, sim_source, silicone_source
-from palpation.mapping.table import table4_maps, table4_markdown, table_row
 from palpation.metrics.aggregate import best_of_five
 from palpation.report.runs import run_dir
+from palpation.report.tables import table4_maps, table4_maps_markdown, table4_maps_row
 
 log = logging.getLogger(__name__)
 
@@ -115,7 +115,7 @@ def run(cfg: DictConfig) -> dict:
         picked = pick_run(c, config)
         source, probs, labels, central = source_for(c, config, picked, layout)
         res = config_maps(config, source, probs, labels, settings, central=central)
-        rows.append(table_row(config, res.op, res.stats))
+        rows.append(table4_maps_row(config, res.op, res.stats))
         pred = res.stack.visited & (res.stack.score >= res.op.threshold)
         image = figures.confusion_mosaic(res.stack.score, res.stack.visited, res.stack.truth, res.op.threshold)
         figures.save_rgb(image, out / f"{config}_confusion.png")
@@ -129,7 +129,7 @@ def run(cfg: DictConfig) -> dict:
                  "operating_point": res.op.to_dict(), "stats": res.stats, "meta": res.meta}
         if res.photo is not None:
             p = res.photo
-            photo_rows.append(table_row(f"{config}/photo", p["op"], p["stats"]))
+            photo_rows.append(table4_maps_row(f"{config}/photo", p["op"], p["stats"]))
             arrays["photo_truth"] = p["truth"]
             photo_image = figures.confusion_mosaic(res.stack.score, res.stack.visited, p["truth"], p["op"].threshold)
             figures.save_rgb(photo_image, out / f"{config}_photo_confusion.png")
@@ -145,7 +145,7 @@ def run(cfg: DictConfig) -> dict:
     save_csv(table, out / "table4_maps.csv")
     save_csv(photo, out / "table4_maps_photo.csv")
     notes = _notes(c, layout, evidence)
-    save_text(out / "table4_maps.md", table4_markdown(table, c["profile"], notes, photo))
+    save_text(out / "table4_maps.md", table4_maps_markdown(table, c["profile"], notes, photo))
     figures.fig7(panels, out / "fig7_confusion_maps", f"Vessel maps ({c['profile']} profile): TP green, FP blue, "
                  "FN red, TN black")
     figures.threshold_figure(curves, out / "fig7_threshold_selection")

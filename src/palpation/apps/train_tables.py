@@ -1,6 +1,6 @@
 """Hydra entry point: gather training runs into tables and Fig. 6 (SPEC §11, §15).
 
-    python -m palpation.apps.report runs_root=results/train out_dir=results/report profile=quick
+    python -m palpation.apps.train_tables runs_root=results/train out_dir=results/report profile=quick
 Writes seed_sweep.{csv,md}, table4_markers.{csv,md}, clip_len_ablation.csv, table3_clip_len.md,
 fig6_pr_curves.{png,pdf} and bench_train.json into out_dir.
 """
@@ -14,10 +14,10 @@ import hydra
 import matplotlib.pyplot as plt
 from omegaconf import DictConfig, OmegaConf
 
+from palpation.figures.pr_curves import pr_figure
 from palpation.io import atomic_path, save_figure, save_json, save_text
 from palpation.metrics.aggregate import pr_curve
 from palpation.report import tables
-from palpation.report.pr_figure import pr_figure
 from palpation.report.runs import load_runs, load_scores
 
 log = logging.getLogger(__name__)
@@ -35,9 +35,9 @@ def run(cfg: DictConfig) -> dict:
     sweep = tables.seed_sweep(runs)
     save_csv(sweep, out / "seed_sweep.csv")
     save_text(out / "seed_sweep.md", tables.seed_sweep_markdown(sweep, profile))
-    t4 = tables.table4(runs)
+    t4 = tables.table4_markers(runs)
     save_csv(t4, out / "table4_markers.csv")
-    save_text(out / "table4_markers.md", tables.table4_markdown(t4, profile))
+    save_text(out / "table4_markers.md", tables.table4_markers_markdown(t4, profile))
 
     curves, chance = {}, {}
     for config in c["experiments"]:
@@ -63,7 +63,7 @@ def run(cfg: DictConfig) -> dict:
     return outputs
 
 
-@hydra.main(version_base="1.3", config_path="../../../conf", config_name="report")
+@hydra.main(version_base="1.3", config_path="../../../conf", config_name="train_tables")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 
