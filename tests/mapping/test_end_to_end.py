@@ -20,7 +20,8 @@ def test_app_maps_a_synthetic_sim_run(sim_set, make_scores, tmp_path):
     for seed, shift in ((0, 6.0), (1, 0.0)):  # seed 1 predicts the vessel where it is: the best of the two
         scores = make_scores(sim_set, shift, seed=seed)
         save_npz(run_dir(root, "A-to-A", 5, seed) / "scores.npz", **scores)
-        save_json(run_dir(root, "A-to-A", 5, seed) / "metrics.json", {"test": marker_metrics(**scores)})
+        metrics = marker_metrics(scores["probs"], scores["labels"])
+        save_json(run_dir(root, "A-to-A", 5, seed) / "metrics.json", {"test": metrics})
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="vessel_maps", overrides=[
             "configs=[A-to-A]", f"runs.root={root}", "runs.seeds=[0,1]", f"data.sim={sim_set}",

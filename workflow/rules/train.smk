@@ -104,7 +104,7 @@ rule train_report:
     input:
         metrics=sweep_runs("metrics.json"),
         scores=sweep_runs("scores.npz"),
-        conf=conf_files("report"),
+        conf=conf_files("train_tables"),
     output:
         TRAIN_REPORT_FILES,
     log:

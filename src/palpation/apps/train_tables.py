@@ -17,8 +17,9 @@ from omegaconf import DictConfig, OmegaConf
 from palpation.figures.pr_curves import pr_figure
 from palpation.io import atomic_path, save_figure, save_json, save_text
 from palpation.metrics.aggregate import pr_curve
+from palpation.metrics.scores import load_scores
 from palpation.report import tables
-from palpation.report.runs import load_runs, load_scores
+from palpation.report.runs import load_runs
 
 log = logging.getLogger(__name__)
 
@@ -42,7 +43,8 @@ def run(cfg: DictConfig) -> dict:
     curves, chance = {}, {}
     for config in c["experiments"]:
         mine = [r for r in runs if r["config"] == config]
-        curves[config] = [pr_curve(*load_scores(r)) for r in mine]
+        scores = [load_scores(Path(r["dir"]) / "scores.npz") for r in mine]
+        curves[config] = [pr_curve(s.probs, s.labels) for s in scores]
         chance[config] = sum(r["chance"] for r in mine) / len(mine)
     fig = pr_figure(curves, chance, f"{profile} profile, L = {c['clip_len']}, seeds {c['seeds']}")
     save_figure(fig, out / "fig6_pr_curves")
