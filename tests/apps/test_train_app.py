@@ -61,6 +61,7 @@ def test_train_run_writes_outputs_and_mlflow(data, tmp_path, results_tmp, monkey
     assert saved["test"] == metrics["test"] and saved["config"] == "A-to-B" and saved["clip_len"] == 3
     with np.load(out / "scores.npz") as z:
         assert z["probs"].shape == z["labels"].shape == (2 * 6 * 127,)  # 2 videos x 6 windows x 127
+        assert z["sequence"].tolist() == [0] * 6 + [1] * 6 and z["frame"].tolist() == [1, 2, 3, 4, 5, 6] * 2
     assert {"auroc", "ap", "fg_iou", "bg_iou", "mcc", "tp"} <= set(metrics["test"])
 
     import mlflow
@@ -84,3 +85,23 @@ def test_multirun_seeds_and_clip_lens(data, tmp_path):
     assert done == [f"C-to-B/L{L}/seed{s}/metrics.json" for L in (1, 3) for s in (0, 1)]
     m = [json.loads((tmp_path / d).read_text()) for d in done]
     assert m[0]["test"]["ap"] != m[1]["test"]["ap"]  # seeds differ
+
+
+def test_schema_types_the_config_and_refuses_unknown_keys():
+    from dataclasses import fields
+
+    from hydra.errors import ConfigCompositionException
+    from omegaconf import OmegaConf
+
+    from palpation.model.config import RecipeSchema, RunSizesSchema, TrainConfig
+
+    with pytest.raises(ConfigCompositionException, match="Key 'epoch' not in 'RunSizesSchema'"):
+        compose_train(["train.epoch=1"])
+    with pytest.raises(ConfigCompositionException, match="could not be converted to Integer"):
+        compose_train(["seed=first"])
+    # `+key=value` adds past a schema in Hydra; the node stays typed, so the apps' key check names it
+    added = compose_train(["+train.epoch=1"])
+    assert OmegaConf.get_type(added.train) is RunSizesSchema and "epoch" in added.train
+    # TrainConfig = the recipe's fields + the chosen sizes + device: the schema cannot drift from it
+    schema = {f.name for f in fields(RecipeSchema)} - {"name", "sizes"} | {f.name for f in fields(RunSizesSchema)}
+    assert schema | {"device"} == {f.name for f in fields(TrainConfig)}

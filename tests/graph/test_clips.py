@@ -31,6 +31,25 @@ def test_centred_windows_cover_every_frame(clip_len):
     assert np.allclose(shift[1], np.clip(21 + np.arange(clip_len) - half, 0, 21))
 
 
+def _clips(lengths, clip_len, stride, window="full"):
+    rest = rest_layout("ideal")
+    markers = [np.zeros((n, 127, 2), np.float32) for n in lengths]
+    seqs = Sequences("s", list(range(len(lengths))), markers, stride,
+                     labels=[np.zeros((n, 127), np.int8) for n in lengths], window=window)
+    return ClipSet(seqs, clip_len, rest)
+
+
+def test_central_frames():
+    """Each window's prediction is for frame start + d (L // 2): the ids stored with the scores."""
+    seq, frame = _clips([16] * 10, 5, 1).central_frames()  # Silicone: frames 2..13 of each video
+    assert len(seq) == 120 and frame[:12].tolist() == list(range(2, 14)) and (seq[:12] == 0).all() and seq[-1] == 9
+    seq, frame = _clips([22, 21], 5, 1, "centred").central_frames()  # Meat: every stored frame
+    assert len(seq) == 22 + 21 and frame.tolist() == list(range(22)) + list(range(21))
+    seq, frame = _clips([317], 5, 24).central_frames()  # Sim: 9 windows, starts 0..192
+    assert frame.tolist() == [48, 72, 96, 120, 144, 168, 192, 216, 240]
+    assert _clips([317], 4, 24).central_frames()[1][0] == 48  # even L: k = 2 of frames 0, 24, 48, 72
+
+
 def test_split_350_75_75():
     ids = [f"trajectory_{i:04d}" for i in range(500)][::-1]
     parts = [split_sorted(ids, s) for s in ("train", "val", "test")]

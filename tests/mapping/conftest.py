@@ -11,7 +11,6 @@ import pytest
 from palpation.camera import DEFAULT_CAMERA
 from palpation.graph.augment import sim_labels
 from palpation.mapping.lift import PLANE_MM, sim_to_world
-from palpation.mapping.samples import central_frames
 from palpation.markers.lattice import ideal_hex_lattice
 
 VESSEL_Y_MM = 39.0  # the twin's vessel axis: along x at y = 39 mm (docs/sim_format.md)
@@ -55,13 +54,15 @@ def write_sim_set(folder: Path, n_files: int = 20, n_frames: int = 144, step_mm:
 
 def sim_scores(manifest: Path, shift_mm: float = 0.0, clip_len: int = 5, stride: int = 24, seed: int = 0,
                split_start: int | None = None) -> dict:
-    """Test-split scores: high probability for markers within 1 mm of the vessel moved by `shift_mm`."""
-    from palpation.graph.sources import sim_trajectory_files, split_sorted
+    """Test-split scores with their ids: high probability for markers within 1 mm of the vessel moved by
+    `shift_mm`."""
+    from palpation.graph.clips import ClipSet
+    from palpation.graph.sources import load_sim, sim_trajectory_files, split_sorted
 
     files = {f.stem: f for f in sim_trajectory_files(manifest)}
     ids = split_sorted(list(files), "test")
     data = [np.load(files[i]) for i in ids]
-    seq, frame = central_frames([len(d["markers"]) for d in data], clip_len, stride)
+    seq, frame = ClipSet(load_sim(manifest, "test", stride), clip_len, REST_PX).central_frames()
     rng = np.random.default_rng(seed)
     probs, labels = [], []
     for s, f in zip(seq, frame):
@@ -71,7 +72,8 @@ def sim_scores(manifest: Path, shift_mm: float = 0.0, clip_len: int = 5, stride:
         near = np.abs(world[:, 1] - VESSEL_Y_MM - shift_mm) < 1.0
         probs.append(np.where(near, 0.8 + rng.uniform(-0.1, 0.1, 127), 0.2 + rng.uniform(-0.05, 0.05, 127)))
         labels.append(d["labels"][f])
-    return {"probs": np.concatenate(probs).astype(np.float32), "labels": np.concatenate(labels).astype(np.int8)}
+    return {"probs": np.concatenate(probs).astype(np.float32), "labels": np.concatenate(labels).astype(np.int8),
+            "sequence": seq, "frame": frame}
 
 
 @pytest.fixture

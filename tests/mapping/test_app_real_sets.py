@@ -7,27 +7,30 @@ import pytest
 from hydra import compose, initialize_config_dir
 
 from palpation.apps.vessel_maps import run
-from palpation.io import save_npz
-from palpation.mapping.samples import central_frames
+from palpation.graph.clips import ClipSet
+from palpation.graph.layout import rest_layout
+from palpation.graph.sources import load_dataset
 from palpation.mapping.sources import meat_trials
+from palpation.metrics.scores import Scores, save_scores
 from palpation.paths import REPO_ROOT
 
 
 
-def noisy_scores(markers, labels, path, seed, window="full"):
-    seq, frame = central_frames([len(m) for m in markers], 5, 1, window)
+def noisy_scores(dataset, data, labels, path, seed):
+    """Label-derived scores of the test set's windows (L = 5), with their ids, as the train app writes them."""
+    seq, frame = ClipSet(load_dataset(dataset, data, "test"), 5, rest_layout("ideal")).central_frames()
     lab = np.concatenate([labels[s][f] for s, f in zip(seq, frame)]).astype(np.int8)
     rng = np.random.default_rng(seed)
     probs = np.clip(0.35 + 0.35 * lab + rng.normal(0, 0.15, lab.size), 0, 1).astype(np.float32)
-    save_npz(path, probs=probs, labels=lab)
+    save_scores(path, Scores(probs, lab, seq, frame))
 
 
 def test_silicone_and_meat_maps(tmp_path, real_sets):
     SILICONE, MEAT = real_sets["silicone"], real_sets["meat"]
     with np.load(SILICONE) as z:
-        noisy_scores(list(z["markers"]), list(z["labels"]), tmp_path / "sil.npz", 0)
+        noisy_scores("silicone", SILICONE, list(z["labels"]), tmp_path / "sil.npz", 0)
     trials = meat_trials(MEAT)
-    noisy_scores([t["markers"] for t in trials], [t["labels"] for t in trials], tmp_path / "meat.npz", 1, "centred")
+    noisy_scores("meat", MEAT, [t["labels"] for t in trials], tmp_path / "meat.npz", 1)
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="vessel_maps", overrides=[
             "configs=[A-to-B,A-to-C]", f"scores.A-to-B={tmp_path / 'sil.npz'}",

@@ -35,17 +35,26 @@ def test_stack_over_max_grid_px(sim_set, make_scores):
 
 def test_empty_prediction_set(sim_set):
     with pytest.raises(ValueError, match="empty prediction set"):
-        config_maps("A-to-A", sim_source(sim_set, "test"), np.zeros(0, np.float32), np.zeros(0, np.int8))
+        config_maps("A-to-A", sim_source(sim_set, "test"), np.zeros(0, np.float32), np.zeros(0, np.int8),
+                    np.zeros(0, np.int64), np.zeros(0, np.int64))
     empty = Samples(*(np.zeros((0,) + sh) for sh in ((), (), (127, 2), (127,), (127,))))
     src = MapSource("silicone", [], [], None, [], 1, np.zeros(0, int), ["silicone"], {})
     with pytest.raises(ValueError, match="empty prediction set"):
         build_stack(src, empty, MapSettings(), "A-to-B (silicone)")
 
 
-def test_scores_of_another_clip_len(sim_set, make_scores):
-    scores = make_scores(sim_set, clip_len=3)
-    with pytest.raises(ValueError, match="clip_len=5"):
-        config_maps("A-to-A", sim_source(sim_set, "test"), **scores)
+def test_scores_of_another_clip_len_map_their_own_frames(sim_set, make_scores):
+    """The ids travel with the scores: an L = 3 run maps its own central frames, no window rule here."""
+    res = config_maps("A-to-A", sim_source(sim_set, "test"), **make_scores(sim_set, clip_len=3))
+    assert res.n_samples == len(make_scores(sim_set, clip_len=3)["frame"])
+
+
+def test_scores_whose_ids_do_not_fit_the_test_set(sim_set, make_scores):
+    scores = make_scores(sim_set)
+    with pytest.raises(ValueError, match="outside the 3 test sequences"):
+        config_maps("A-to-A", sim_source(sim_set, "test"), **{**scores, "frame": scores["frame"] + 1000})
+    with pytest.raises(ValueError, match="labels differ"):
+        config_maps("A-to-A", sim_source(sim_set, "test"), **{**scores, "labels": 1 - scores["labels"]})
 
 
 def test_missing_inputs_name_the_rule(tmp_path):

@@ -9,7 +9,7 @@ from palpation.io import save_json, save_npz
 from palpation.mapping.pipeline import MapSettings, config_maps
 from palpation.mapping.sources import sim_source
 from palpation.mapping.stats import map_stats
-from palpation.mapping.table import COLUMNS
+from palpation.report.tables import MAPS_COLUMNS
 from palpation.metrics.classification import marker_metrics
 from palpation.paths import REPO_ROOT
 from palpation.report.runs import run_dir
@@ -20,7 +20,8 @@ def test_app_maps_a_synthetic_sim_run(sim_set, make_scores, tmp_path):
     for seed, shift in ((0, 6.0), (1, 0.0)):  # seed 1 predicts the vessel where it is: the best of the two
         scores = make_scores(sim_set, shift, seed=seed)
         save_npz(run_dir(root, "A-to-A", 5, seed) / "scores.npz", **scores)
-        save_json(run_dir(root, "A-to-A", 5, seed) / "metrics.json", {"test": marker_metrics(**scores)})
+        metrics = marker_metrics(scores["probs"], scores["labels"])
+        save_json(run_dir(root, "A-to-A", 5, seed) / "metrics.json", {"test": metrics})
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="vessel_maps", overrides=[
             "configs=[A-to-A]", f"runs.root={root}", "runs.seeds=[0,1]", f"data.sim={sim_set}",
@@ -29,7 +30,7 @@ def test_app_maps_a_synthetic_sim_run(sim_set, make_scores, tmp_path):
     entry = result["configs"]["A-to-A"]
     assert entry["run"]["seed"] == 1
     table = pd.read_csv(out / "table4_maps.csv")
-    assert list(table.columns) == list(COLUMNS)
+    assert list(table.columns) == list(MAPS_COLUMNS)
     row = table.iloc[0]
     assert row["threshold_rule"] == "precision>=0.9@3mm"
     assert 0.25 < row["threshold"] <= 0.9  # above every background score

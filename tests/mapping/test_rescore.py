@@ -30,12 +30,12 @@ def test_dense_slide_scores_every_start_and_maps(tmp_path, make_sim_set):
     slide = make_sim_set(tmp_path / "slide", n_files=1)
     ckpt = untrained_checkpoint(tmp_path / "run" / "checkpoint.pt")
     dense = score_dense(ckpt, slide, batch_size=32)
-    assert len(dense["seq"]) == 144 - 24 * 5 + 1
+    assert len(dense["sequence"]) == 144 - 24 * 5 + 1
     assert dense["frame"][0] == 48 and np.all(np.diff(dense["frame"]) == 1)
     with np.load(slide.parent / "trajectory_0000.npz") as z:  # labels recomputed by the clip set = the file's
         assert np.array_equal(dense["labels"].reshape(-1, 127), z["labels"][dense["frame"]])
-    res = config_maps("A-to-A", sim_source(slide, "all"), dense["probs"], dense["labels"],
-                      central=(dense["seq"], dense["frame"]))
+    res = config_maps("A-to-A", sim_source(slide, "all"), dense["probs"], dense["labels"], dense["sequence"],
+                      dense["frame"])
     assert len(res.stack) == 1 and res.stack.truth.any()
 
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
@@ -43,4 +43,4 @@ def test_dense_slide_scores_every_start_and_maps(tmp_path, make_sim_set):
             "configs=[A-to-A]", f"scores.A-to-A={ckpt.parent / 'scores.npz'}", "sim.source=slide",
             f"sim.slide_manifest={slide}", "sim.batch_size=32", f"out_dir={tmp_path / 'maps'}", "tracking=false"])
     out = run(cfg)
-    assert out["configs"]["A-to-A"]["n_samples"] == len(dense["seq"])
+    assert out["configs"]["A-to-A"]["n_samples"] == len(dense["sequence"])

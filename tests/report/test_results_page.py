@@ -209,9 +209,9 @@ def test_app_help():
 
 def test_paper_numbers_have_one_home():
     from palpation.calibration.validate import SPEC_TWIN_PX
-    from palpation.mapping.table import PAPER
+    from palpation.report import tables
 
-    assert PAPER is paper.TABLE4_MAPS and SPEC_TWIN_PX["press"] == 11.87
+    assert tables.TABLE4_MAPS is paper.TABLE4_MAPS and SPEC_TWIN_PX["press"] == 11.87
     for name, rate in REFERENCE_POSITIVE_RATE.items():
         assert paper.DATASETS[name]["positive_rate"] == rate
     assert round(sum(v["twin"] for v in paper.CALIBRATION_MAE.values()) / 4, 2) == paper.CALIBRATION_MEAN["twin"]

@@ -53,7 +53,7 @@ rule train_report:
     input:
         metrics=sweep_runs("metrics.json"),
         scores=sweep_runs("scores.npz"),
-        conf=conf_files("report"),
+        conf=conf_files("train_tables"),
     output:
         TRAIN_REPORT_FILES,
     log:
@@ -75,7 +75,7 @@ rule train_report:
     conda:
         CONDA_ENV
     shell:
-        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.report profile={params.profile}"
+        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.train_tables profile={params.profile}"
         " runs_root={params.runs_root} out_dir={params.out_dir} 'experiments={params.experiments}'"
         " 'seeds={params.seeds}' clip_len={params.clip_len} {params.ablation} hydra.run.dir={params.out_dir}"
         " > {log} 2>&1"

@@ -24,7 +24,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from palpation.calibration.objective import marker_mae_px
 from palpation.io import save_json, save_text
-from palpation.loop import figures, report
+from palpation.figures import loop as figures
+from palpation.loop import report
 from palpation.loop.config import LoopConfig
 from palpation.loop.inputs import load_targets
 from palpation.loop.real import base_params, make_problem, run_loop, twin_key

@@ -14,9 +14,10 @@ from pathlib import Path
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
+from palpation.figures.realdata import meat_overview
 from palpation.io import save_figure, save_json, save_npz
 from palpation.markers.template import rest_template
-from palpation.realdata.meat import build_meat, metadata, overview_figure
+from palpation.realdata.meat import build_meat, metadata
 from palpation.realdata.panels import read_states
 
 log = logging.getLogger(__name__)
@@ -29,7 +30,7 @@ def run(cfg: DictConfig) -> dict:
     data = build_meat(panels["ground_truth"], panels["hard_prediction"], template,
                       scope=cfg.similarity_scope, source=str(video))
     meta = metadata(data, cfg.similarity_scope, str(video))
-    fig = overview_figure(data, list(cfg.overview_states)) if cfg.figure else None
+    fig = meat_overview(data, list(cfg.overview_states)) if cfg.figure else None
 
     save_npz(cfg.out.npz, **data)
     save_json(cfg.out.json, meta)

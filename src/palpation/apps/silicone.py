@@ -18,12 +18,11 @@ import hydra
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from palpation.camera import video_to_sensor_px
+from palpation.figures.realdata import silicone_overview
 from palpation.io import save_figure, save_json, save_npz
 from palpation.markers.template import rest_template
 from palpation.realdata import silicone as sil
 from palpation.realdata.silicone_check import check_labels
-from palpation.realdata.video import read_states
 
 log = logging.getLogger(__name__)
 
@@ -43,7 +42,7 @@ def _build(cfg: DictConfig) -> dict:
     data = sil.build_silicone_set(video, list(cfg.videos), int(cfg.n_frames), params, template,
                                   progress=bool(cfg.progress))
     meta = metadata(data, video, params)
-    fig = overview_figure(data, video, [tuple(x) for x in cfg.overview]) if cfg.figure else None
+    fig = silicone_overview(data, video, [tuple(x) for x in cfg.overview]) if cfg.figure else None
 
     save_npz(cfg.out.npz, **data)
     save_json(cfg.out.json, meta)
@@ -107,43 +106,6 @@ def metadata(data: dict, video: Path, params: sil.SiliconeParams) -> dict:
         "params": dataclasses.asdict(params),
         "summary": sil.summarize(data),
     }
-
-
-def overview_figure(data: dict, video: Path, pairs: list[tuple[int, int]]):
-    """A few frames with markers coloured by label (hollow = filled), dots and their chords."""
-    import matplotlib.pyplot as plt
-
-    videos = [int(v) for v in data["videos"]]
-    pairs = [(v, f) for v, f in pairs if v in videos and f <= data["states"].shape[1]]
-    frames = read_states(video, states=[sil.state_index(v, f) for v, f in pairs])
-    ncol = 3
-    nrow = max(1, -(-len(pairs) // ncol))
-    fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 4.2 * nrow), squeeze=False)
-    (x0, y0), (x1, y1) = video_to_sensor_px([[0, 0], [1280, 760]])
-    for ax, (v, f), frame in zip(axes.ravel(), pairs, frames):
-        k, t = videos.index(v), f - 1
-        ax.imshow(frame[..., ::-1], extent=(x0, x1, y1, y0), interpolation="bilinear")
-        _draw_state(ax, data, k, t)
-        ax.set_title(f"video {v} ({sil.SWEEP_NAMES[v - 1]}), frame {f}", fontsize=9)
-    for ax in axes.ravel():
-        ax.set_xlim(640, 1440), ax.set_ylim(984, 184), ax.set_xticks([]), ax.set_yticks([])
-    fig.suptitle("Silicone set: markers by label (magenta 1, cyan 0, hollow = filled), dots and chords")
-    fig.tight_layout()
-    return fig
-
-
-def _draw_state(ax, data: dict, k: int, t: int) -> None:
-    markers, labels, source = data["markers"][k, t], data["labels"][k, t], data["source"][k, t]
-    colour = np.where(labels[:, None] == 1, [[0.9, 0.0, 0.9]], [[0.0, 0.8, 0.9]])
-    shown = source > sil.SOURCE_FILLED
-    ax.scatter(*markers[shown].T, s=9, c=colour[shown], linewidths=0)
-    ax.scatter(*markers[~shown].T, s=30, facecolors="none", edgecolors=colour[~shown], linewidths=1.2,
-               zorder=4)  # filled markers lie under a dot: draw them on top
-    for dot, c in zip(data["dots"][k, t, :data["dot_counts"][k, t]], data["dot_colours"][k, t]):
-        chord = sil.chord_samples(dot, float(data["line_angle_deg"][k]))
-        if chord is not None:
-            ax.plot(*chord.T, color="yellow", lw=0.8, alpha=0.8)
-        ax.scatter(*dot, s=60, c=sil.DOT_COLOURS[c], edgecolors="black", linewidths=1.0, zorder=3)
 
 
 def _track(cfg: DictConfig, stage: str, metrics: dict) -> None:

@@ -20,16 +20,17 @@ import pandas as pd
 from omegaconf import DictConfig, OmegaConf
 
 from palpation import tracking
+from palpation.figures import maps as figures
 from palpation.io import atomic_path, save_json, save_npz, save_text
-from palpation.mapping import figures
+from palpation.mapping import config as maps_config  # noqa: F401 (registers the schema base_vessel_maps)
 from palpation.mapping.pipeline import TEST_DATASET, MapSettings, config_maps
-from palpation.mapping.samples import load_scores
 from palpation.mapping.silicone_check import pose_check
 from palpation.mapping.silicone_poses import SweepLayout, direction_evidence, estimate_mirror
 from palpation.mapping.sources import meat_source, sim_source, silicone_source
-from palpation.mapping.table import table4_maps, table4_markdown, table_row
 from palpation.metrics.aggregate import best_of_five
+from palpation.metrics.scores import load_scores
 from palpation.report.runs import run_dir
+from palpation.report.tables import table4_maps, table4_maps_markdown, table4_maps_row
 
 log = logging.getLogger(__name__)
 
@@ -70,22 +71,22 @@ def silicone_layout(c: dict) -> tuple[SweepLayout, dict]:
 
 
 def source_for(c: dict, config: str, run: dict, layout: SweepLayout | None):
-    """(MapSource, probs, labels, central) of one configuration."""
+    """(MapSource, {probs, labels, sequence, frame}) of one configuration."""
     dataset = TEST_DATASET[config]
     if dataset == "silicone":
-        return (silicone_source(c["data"]["silicone"], layout), *load_scores(run["scores"]), None)
+        return silicone_source(c["data"]["silicone"], layout), vars(load_scores(run["scores"]))
     if dataset == "meat":
-        return (meat_source(c["data"]["meat"]), *load_scores(run["scores"]), None)
+        return meat_source(c["data"]["meat"]), vars(load_scores(run["scores"]))
     if c["sim"]["source"] == "slide":
         from palpation.mapping.rescore import score_dense
 
         dense = score_dense(Path(run["dir"]) / "checkpoint.pt", c["sim"]["slide_manifest"], "all",
                             c["sim"]["batch_size"], c["device"], progress=bool(c["progress"]))
         source = sim_source(c["sim"]["slide_manifest"], "all")
-        return source, dense["probs"], dense["labels"], (dense["seq"], dense["frame"])
+        return source, {k: dense[k] for k in ("probs", "labels", "sequence", "frame")}
     if c["sim"]["source"] != "test":
         raise ValueError(f"sim.source must be 'test' or 'slide', got {c['sim']['source']!r}")
-    return (sim_source(c["data"]["sim"], "test"), *load_scores(run["scores"]), None)
+    return sim_source(c["data"]["sim"], "test"), vars(load_scores(run["scores"]))
 
 
 def save_csv(df: pd.DataFrame, path: Path) -> None:
@@ -100,7 +101,11 @@ def run(cfg: DictConfig) -> dict:
     unknown = [k for k in c["configs"] if k not in TEST_DATASET]
     if unknown:
         raise ValueError(f"unknown configuration(s) {unknown}; use {sorted(TEST_DATASET)}")
-    settings = MapSettings(clip_len=int(c["clip_len"]), max_grid_px=int(c["max_grid_px"]),
+    unknown = [f"scores.{k}" for k in c["scores"] if k not in TEST_DATASET]
+    if unknown:
+        raise ValueError(f"unknown config key(s) {unknown} in conf/vessel_maps.yaml or the overrides; scores "
+                         f"are given per configuration: {sorted(TEST_DATASET)}")
+    settings = MapSettings(max_grid_px=int(c["max_grid_px"]),
                            sim_max_maps=c["sim"]["max_maps"], sim_vessel_only=bool(c["sim"]["vessel_only"]),
                            **c["threshold"])
     layout, evidence = None, None
@@ -113,9 +118,9 @@ def run(cfg: DictConfig) -> dict:
     rows, photo_rows, panels, curves, summary = [], [], [], [], {}
     for config in c["configs"]:
         picked = pick_run(c, config)
-        source, probs, labels, central = source_for(c, config, picked, layout)
-        res = config_maps(config, source, probs, labels, settings, central=central)
-        rows.append(table_row(config, res.op, res.stats))
+        source, scores = source_for(c, config, picked, layout)
+        res = config_maps(config, source, **scores, settings=settings)
+        rows.append(table4_maps_row(config, res.op, res.stats))
         pred = res.stack.visited & (res.stack.score >= res.op.threshold)
         image = figures.confusion_mosaic(res.stack.score, res.stack.visited, res.stack.truth, res.op.threshold)
         figures.save_rgb(image, out / f"{config}_confusion.png")
@@ -129,7 +134,7 @@ def run(cfg: DictConfig) -> dict:
                  "operating_point": res.op.to_dict(), "stats": res.stats, "meta": res.meta}
         if res.photo is not None:
             p = res.photo
-            photo_rows.append(table_row(f"{config}/photo", p["op"], p["stats"]))
+            photo_rows.append(table4_maps_row(f"{config}/photo", p["op"], p["stats"]))
             arrays["photo_truth"] = p["truth"]
             photo_image = figures.confusion_mosaic(res.stack.score, res.stack.visited, p["truth"], p["op"].threshold)
             figures.save_rgb(photo_image, out / f"{config}_photo_confusion.png")
@@ -145,7 +150,7 @@ def run(cfg: DictConfig) -> dict:
     save_csv(table, out / "table4_maps.csv")
     save_csv(photo, out / "table4_maps_photo.csv")
     notes = _notes(c, layout, evidence)
-    save_text(out / "table4_maps.md", table4_markdown(table, c["profile"], notes, photo))
+    save_text(out / "table4_maps.md", table4_maps_markdown(table, c["profile"], notes, photo))
     figures.fig7(panels, out / "fig7_confusion_maps", f"Vessel maps ({c['profile']} profile): TP green, FP blue, "
                  "FN red, TN black")
     figures.threshold_figure(curves, out / "fig7_threshold_selection")

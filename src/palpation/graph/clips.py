@@ -5,6 +5,8 @@ while the window fits in the F//d coarse steps (9 per 317-frame trajectory at L 
 (d = 1): every start, 12 per 16-frame Silicone video at L = 5. Sequences marked `centred` (Meat,
 which holds only the central frames of the reference's clips) get one window centred on every frame,
 frames outside the sequence replaced by the nearest one.
+A clip's prediction is for its central frame k = L // 2 (`central_offset`); `ClipSet.central_frames`
+gives the (sequence, frame) of each window, the ids stored with the scores (palpation.metrics.scores).
 """
 
 from __future__ import annotations
@@ -21,13 +23,18 @@ def window_starts(n_frames: int, clip_len: int, stride: int) -> np.ndarray:
     return np.arange(max(steps - clip_len + 1, 0)) * stride
 
 
+def central_offset(clip_len: int) -> int:
+    """Index inside a clip of the frame its prediction is for: k = L // 2 (SPEC §8.3)."""
+    return clip_len // 2
+
+
 class ClipSet:
     """All windows of some sequences; `gather` builds clip arrays with optional rotation."""
 
     def __init__(self, seqs: Sequences, clip_len: int, rest: np.ndarray):
         self.seqs, self.clip_len = seqs, clip_len
         if seqs.window == "centred":
-            half = (clip_len // 2) * seqs.stride
+            half = central_offset(clip_len) * seqs.stride
             rows = [(i, c - half) for i, m in enumerate(seqs.markers) for c in range(len(m))]
         else:
             rows = [(i, s) for i, m in enumerate(seqs.markers)
@@ -40,6 +47,10 @@ class ClipSet:
 
     def __len__(self) -> int:
         return len(self.windows)
+
+    def central_frames(self) -> tuple[np.ndarray, np.ndarray]:
+        """(sequence index, frame) of every window's central frame, in window order."""
+        return self.windows[:, 0].copy(), self.windows[:, 1] + self.seqs.stride * central_offset(self.clip_len)
 
     def frames(self, seq: int, start: int) -> np.ndarray:
         f = start + self.seqs.stride * np.arange(self.clip_len)

@@ -19,7 +19,6 @@ TEST_DATASET = {"A-to-A": "sim", "A-to-B": "silicone", "A-to-C": "meat", "C-to-B
 
 @dataclass(frozen=True)
 class MapSettings:
-    clip_len: int = 5
     tolerance_mm: float = 3.0
     min_precision: float = 0.9
     min_pixels: int = 20
@@ -88,15 +87,12 @@ def evaluate(stack: MapStack, truth: np.ndarray, settings: MapSettings) -> tuple
     return op, curve, all_radii(stack.score, stack.visited, truth, op.threshold)
 
 
-def config_maps(config: str, source: MapSource, probs: np.ndarray, labels: np.ndarray,
-                settings: MapSettings = MapSettings(), polygons=None, central: tuple | None = None) -> ConfigMaps:
-    """Maps, operating point and statistics of one configuration from its pooled test scores.
-
-    central: explicit (seq, frame) of each scored clip (the dense Sim slide); default: the test windows.
-    """
+def config_maps(config: str, source: MapSource, probs: np.ndarray, labels: np.ndarray, sequence: np.ndarray,
+                frame: np.ndarray, settings: MapSettings = MapSettings(), polygons=None) -> ConfigMaps:
+    """Maps, operating point and statistics of one configuration from its pooled test scores and their
+    (sequence, frame) ids (palpation.metrics.scores; the dense Sim slide: mapping.rescore)."""
     what = f"{config} ({source.dataset})"
-    samples = align(probs, labels, source.markers, source.labels, settings.clip_len, source.stride, what,
-                    central, source.window)
+    samples = align(probs, labels, sequence, frame, source.markers, source.labels, what)
     meta = {"n_sequences": len(source.ids), **source.meta}
     if source.dataset == "sim":
         samples, kept = select_sim_maps(samples, source, settings)

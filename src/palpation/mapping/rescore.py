@@ -28,7 +28,7 @@ def dense_windows(lengths, clip_len: int, stride: int = SIM_STRIDE) -> np.ndarra
 def score_dense(checkpoint: str | Path, manifest: str | Path, split: str = "all", batch_size: int = 64,
                 device: str = "cpu", progress: bool = False) -> dict:
     """Central-frame probs/labels of every dense window of the slides in `manifest`, and their
-    (seq, frame); sequences in sorted-name order as in palpation.mapping.sources.sim_source.
+    (sequence, frame) ids; sequences in sorted-name order as in palpation.mapping.sources.sim_source.
     `progress`: a tqdm bar over the scoring batches."""
     from palpation.model.checkpoint import load_checkpoint
     from palpation.model.evaluate import predict
@@ -40,7 +40,6 @@ def score_dense(checkpoint: str | Path, manifest: str | Path, split: str = "all"
     clips.windows = dense_windows([len(m) for m in seqs.markers], clip_len, seqs.stride)
     topo = clip_topology(spatial_edges(rest), clip_len)
     probs, labels = predict(model, clips, stats, rest, topo, batch_size, device=device, progress=progress)
-    seq = clips.windows[:, 0]
-    frame = clips.windows[:, 1] + seqs.stride * (clip_len // 2)
-    return {"probs": probs, "labels": labels, "seq": seq, "frame": frame, "clip_len": clip_len,
+    sequence, frame = clips.central_frames()
+    return {"probs": probs, "labels": labels, "sequence": sequence, "frame": frame, "clip_len": clip_len,
             "ids": list(seqs.ids)}

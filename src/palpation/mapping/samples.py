@@ -1,43 +1,22 @@
-"""Which frame each pooled score belongs to: the test set's central frames, rebuilt with the clip set.
+"""Which frame each pooled score belongs to: the (sequence, frame) ids stored with the scores.
 
-`scores.npz` (palpation.model.job) holds `probs` and `labels` of the central-frame markers pooled in
-clip order: sequences in test-set order, windows in `ClipSet.windows` order, 127 markers per clip. We
-rebuild the same windows by building a `palpation.graph.clips.ClipSet` over the same sequences, so the
-rule lives in one place. A window (seq, start) has its central frame at start + d * (L // 2):
-* Silicone (d = 1, L = 5, windows inside the video): central frames 2..13 of each 16-frame video;
-* Meat (`window="centred"`: the set holds only the reference's central frames): every frame;
-* Sim (d = 24, L = 5): starts 0, 24, ..., 192, central frames 48, 72, ..., 240.
-The scores' labels are compared with the dataset's labels at the rebuilt frames, so a different clip
-length, split or order is caught instead of mapping predictions onto the wrong frames.
+`scores.npz` (palpation.metrics.scores) holds `probs` and `labels` of the central-frame markers pooled in
+clip order, 127 markers per clip, and each clip's central frame as `sequence` (an index into the test
+set's sequences, in the training loader's order, which the map sources share) and `frame`. The window
+rule that chose those frames lives in palpation.graph.clips only. The scores' labels are compared with
+the dataset's labels at those frames, so scores of another dataset, split or order are caught instead
+of mapping predictions onto the wrong frames.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from palpation.graph.clips import ClipSet
-from palpation.graph.layout import rest_layout
-from palpation.graph.sources import Sequences
 from palpation.markers.lattice import N_MARKERS
 
 MAX_LABEL_MISMATCH = 0.01  # Sim labels are recomputed at load time; real labels must agree exactly
-_REST = rest_layout("ideal")  # ClipSet wants a rest layout for its rotations; windows do not use it
-
-
-def central_frames(lengths, clip_len: int, stride: int, window: str = "full") -> tuple[np.ndarray, np.ndarray]:
-    """(sequence index, central frame) of every window, in ClipSet order."""
-    if clip_len < 1 or stride < 1:
-        raise ValueError(f"clip_len and stride must be >= 1, got {clip_len}, {stride}")
-    lengths = [int(n) for n in lengths]
-    if not lengths:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    seqs = Sequences("map", list(range(len(lengths))), [np.zeros((n, N_MARKERS, 2), np.float32) for n in lengths],
-                     stride, labels=[np.zeros((n, N_MARKERS), np.int8) for n in lengths], window=window)
-    windows = ClipSet(seqs, clip_len, _REST).windows
-    return windows[:, 0].copy(), windows[:, 1] + stride * (clip_len // 2)
 
 
 @dataclass
@@ -57,43 +36,27 @@ class Samples:
         return Samples(self.seq[keep], self.frame[keep], self.pixels[keep], self.probs[keep], self.labels[keep])
 
 
-def load_scores(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """`probs` (n,) and `labels` (n,) of one evaluation run."""
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"scores {path} not found; run the train rule for this configuration first")
-    with np.load(path) as z:
-        missing = [k for k in ("probs", "labels") if k not in z]
-        if missing:
-            raise ValueError(f"{path}: missing {missing}; expected scores.npz from palpation.model.job")
-        probs, labels = z["probs"].astype(np.float32).ravel(), z["labels"].astype(np.int8).ravel()
-    if probs.size == 0:
-        raise ValueError(f"{path}: empty prediction set (0 scores); re-run the evaluation of this configuration")
-    if probs.shape != labels.shape:
-        raise ValueError(f"{path}: probs {probs.shape} and labels {labels.shape} differ in length")
-    return probs, labels
+def align(probs: np.ndarray, labels: np.ndarray, sequence: np.ndarray, frame: np.ndarray, markers: list,
+          seq_labels: list | None, source: str = "scores") -> Samples:
+    """Attach pooled scores to their central frames of `markers` (list of (T, 127, 2) sequences).
 
-
-def align(probs: np.ndarray, labels: np.ndarray, markers: list, seq_labels: list | None, clip_len: int,
-          stride: int, source: str = "scores", central: tuple | None = None, window: str = "full") -> Samples:
-    """Attach pooled scores to the central frames of `markers` (list of (T, 127, 2) sequences).
-
-    seq_labels: the dataset's (T, 127) labels per sequence, checked against the scores' labels.
-    central: explicit (seq, frame) per clip (e.g. the dense Sim slide); default: the ClipSet windows
-    (`window` as the dataset's Sequences: "full" or "centred").
+    sequence, frame: the scores' ids, one per clip. seq_labels: the dataset's (T, 127) labels per
+    sequence, checked against the scores' labels.
     """
     probs, labels = np.asarray(probs).ravel(), np.asarray(labels).ravel()
+    seq, frame = np.asarray(sequence, np.int64).ravel(), np.asarray(frame, np.int64).ravel()
     if probs.size == 0:
         raise ValueError(f"{source}: empty prediction set; nothing to map (re-run the evaluation)")
-    if central is None:
-        seq, frame = central_frames([len(m) for m in markers], clip_len, stride, window)
-    else:
-        seq, frame = (np.asarray(a, np.int64) for a in central)
-    expected = len(seq) * N_MARKERS
-    if probs.size != expected:
-        raise ValueError(f"{source}: {probs.size} scores but the test set gives {len(seq)} central frames x "
-                         f"{N_MARKERS} = {expected} at clip_len={clip_len}, stride={stride}, window={window}; "
-                         f"pass the clip_len and dataset the run was scored with")
+    if probs.size != len(seq) * N_MARKERS or len(seq) != len(frame):
+        raise ValueError(f"{source}: {probs.size} scores for {len(seq)} sequence and {len(frame)} frame ids "
+                         f"(need {N_MARKERS} per id); rerun the train rule for this run")
+    lengths = np.array([len(m) for m in markers], np.int64)
+    outside = (seq < 0) | (seq >= len(lengths))
+    outside[~outside] = (frame[~outside] < 0) | (frame[~outside] >= lengths[seq[~outside]])
+    if outside.any():
+        i = int(np.argmax(outside))
+        raise ValueError(f"{source}: {int(outside.sum())} score ids lie outside the {len(lengths)} test sequences "
+                         f"(e.g. sequence {seq[i]}, frame {frame[i]}); the scores come from another dataset or split")
     pixels = np.stack([markers[s][f] for s, f in zip(seq, frame)]).astype(np.float64)
     samples = Samples(seq, frame, pixels, probs.reshape(-1, N_MARKERS).astype(np.float32),
                       labels.reshape(-1, N_MARKERS).astype(np.int8))
@@ -102,6 +65,6 @@ def align(probs: np.ndarray, labels: np.ndarray, markers: list, seq_labels: list
         mismatch = float(np.mean(ref != samples.labels))
         if mismatch > MAX_LABEL_MISMATCH:
             raise ValueError(f"{source}: the scores' labels differ from the dataset's at {100 * mismatch:.1f} % "
-                             f"of the rebuilt central-frame markers; the scores come from another dataset, "
-                             f"split, order or clip_len")
+                             f"of their central-frame markers; the scores come from another dataset, split or "
+                             f"order")
     return samples

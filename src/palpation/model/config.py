@@ -1,11 +1,21 @@
-"""Typed configuration of the model and of one training run; apps build these from Hydra at the edge."""
+"""Typed configuration of the model and of one training run, and the schema of the train app's config.
+
+`ModelConfig` and `TrainConfig` are what the library takes; the train app builds them at the edge. The
+schema (`TrainAppConfig`, stored as `base_train`; conf/train.yaml starts with `defaults: [base_train]`)
+types every key of the composed config, so a typo or an unknown key (`+train.epoch=1`) fails when Hydra
+composes it. Values live in the YAML files (MISSING here); the schema only gives names and types.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Dict, Optional
+
+from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING
 
 
-@dataclass(frozen=True)
+@dataclass  # not frozen: it is also the schema of the `model` group (OmegaConf cannot merge into frozen nodes)
 class ModelConfig:
     """Widths of SPEC §9: large s=248 / L_d=256 / k=128, compact 56 / 64 / 32."""
 
@@ -50,3 +60,69 @@ class TrainConfig:
             raise ValueError(f"schedule must be 'none' or 'step', got '{self.schedule}'")
         if self.batch_size < 1 or self.epochs < 1:
             raise ValueError(f"batch_size and epochs must be >= 1, got {self.batch_size}, {self.epochs}")
+
+
+# ---- schema of conf/train.yaml (Hydra needs runtime types: Optional/Dict, not `int | None`) ----
+
+@dataclass
+class SizesSchema:
+    """One model's sizes: recipe.sizes.<model> and the chosen `train` block."""
+
+    batch_size: int = MISSING
+    epochs: int = MISSING
+    train_batches: Optional[int] = MISSING  # null = the whole training split
+    val_batches: Optional[int] = MISSING
+
+
+@dataclass
+class RunSizesSchema(SizesSchema):
+    threshold: float = MISSING
+
+
+@dataclass
+class RecipeSchema:
+    """conf/recipe/*.yaml: TrainConfig's recipe fields and the sizes per model."""
+
+    name: str = MISSING
+    lr: float = MISSING
+    weight_decay: float = MISSING
+    focal_gamma: float = MISSING
+    norm_stats: str = MISSING
+    norm_clips: Optional[int] = MISSING
+    rotation: str = MISSING
+    schedule: str = MISSING
+    step_size: int = MISSING
+    step_gamma: float = MISSING
+    sizes: Dict[str, SizesSchema] = MISSING
+
+
+@dataclass
+class TrainDataSchema:
+    sim: str = MISSING
+    silicone: str = MISSING
+    meat: str = MISSING
+
+
+@dataclass
+class GraphSchema:
+    rest: str = MISSING
+
+
+@dataclass
+class TrainAppConfig:
+    config_name: str = MISSING
+    seed: int = MISSING
+    clip_len: int = MISSING
+    device: str = MISSING
+    train_on: str = MISSING
+    test_on: str = MISSING
+    data: TrainDataSchema = field(default_factory=TrainDataSchema)
+    graph: GraphSchema = field(default_factory=GraphSchema)
+    train: RunSizesSchema = field(default_factory=RunSizesSchema)
+    model: ModelConfig = field(default_factory=ModelConfig)
+    recipe: RecipeSchema = field(default_factory=RecipeSchema)
+    tracking: bool = MISSING
+    progress: bool = MISSING
+
+
+ConfigStore.instance().store(name="base_train", node=TrainAppConfig)

@@ -6,7 +6,7 @@ import numpy as np
 import torch
 
 from palpation.graph.batch import make_batch
-from palpation.graph.clips import ClipSet
+from palpation.graph.clips import ClipSet, central_offset
 from palpation.graph.edges import ClipTopology
 from palpation.graph.normalise import NormStats
 from palpation.markers.lattice import N_MARKERS
@@ -14,8 +14,8 @@ from palpation.progress import bar
 
 
 def central_slice(clip_len: int) -> slice:
-    """Marker nodes of the central frame k = L // 2 inside one clip."""
-    k = clip_len // 2
+    """Marker nodes of the central frame inside one clip."""
+    k = central_offset(clip_len)
     return slice(k * N_MARKERS, (k + 1) * N_MARKERS)
 
 

@@ -1,7 +1,8 @@
 """One training job end to end: load data, fit, score the test set, write outputs, track the run.
 
 Outputs in `out_dir`: checkpoint.pt (weights + normalisation statistics + rest layout), scores.npz
-(`probs`, `labels` of the test central frames), pr.npz (the test PR curve) and metrics.json.
+(`probs`, `labels` of the test central frames, their `sequence`, `frame` ids: palpation.metrics.scores),
+pr.npz (the test PR curve) and metrics.json.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from palpation.graph.sources import load_dataset
 from palpation.io import save_json, save_npz
 from palpation.metrics.aggregate import pr_curve
 from palpation.metrics.classification import marker_metrics
+from palpation.metrics.scores import Scores, save_scores
 from palpation.model.checkpoint import checkpoint_bytes, save_checkpoint
 from palpation.model.config import ModelConfig, TrainConfig
 from palpation.model.evaluate import predict
@@ -89,7 +91,7 @@ def run_job(job: TrainJob, out_dir: str | Path, params: dict | None = None, trac
             "train_seconds": result.train_seconds, "test_seconds": test_seconds,
             "device": device_name(job.train.device),
         }
-        save_npz(out_dir / "scores.npz", probs=probs, labels=labels)
+        save_scores(out_dir / "scores.npz", Scores(probs, labels, *test.central_frames()))
         save_npz(out_dir / "pr.npz", **pr_curve(probs, labels))
         save_checkpoint(out_dir / "checkpoint.pt", result.model, job.model, result.stats, rest,
                         extra={"config": job.config_name, "seed": job.seed, "train_on": job.train_on})

@@ -200,38 +200,6 @@ def trial_sequences(data: dict[str, np.ndarray]) -> list[dict[str, np.ndarray]]:
             for i, (a, b) in enumerate(zip(off[:-1], off[1:]))]
 
 
-def draw_state(ax, markers: np.ndarray, labels: np.ndarray, template: np.ndarray, title: str) -> None:
-    """Markers of one frame in sensor px, coloured by label as in the viewer, over the rest template."""
-    ax.scatter(*template.T, s=28, facecolors="none", edgecolors="0.65", linewidths=0.6, label="rest")
-    for value, colour in ((0, "c"), (1, "m")):
-        ax.scatter(*markers[labels == value].T, s=9, c=colour, label=f"label {value}")
-    ax.set_title(f"{title}\n{int(labels.sum())} positive", fontsize=8)
-    ax.set_aspect("equal")
-    ax.invert_yaxis()  # image coordinates, y down
-    ax.tick_params(labelsize=6)
-
-
-def overview_figure(data: dict[str, np.ndarray], states: list[int], n_cols: int = 3):
-    """A grid of `draw_state` panels for a few viewer states."""
-    import matplotlib.pyplot as plt
-
-    n_rows = -(-len(states) // n_cols)
-    fig, axes = plt.subplots(n_rows, n_cols, figsize=(3.2 * n_cols, 3.0 * n_rows), squeeze=False)
-    for ax, s in zip(axes.flat, states):
-        trial, frame = state_to_trial(s)
-        draw_state(ax, data["markers"][s], data["labels"][s], data["template"],
-                   f"state {s}: trial {trial.trial_id}, frame {frame}\n{trial.description}")
-    for ax in axes.flat[len(states):]:
-        ax.set_axis_off()
-    axes.flat[0].legend(fontsize=6, loc="lower left")
-    for ax in axes[-1]:
-        ax.set_xlabel("sensor x (px)", fontsize=7)
-    for ax in axes[:, 0]:
-        ax.set_ylabel("sensor y (px)", fontsize=7)
-    fig.tight_layout()
-    return fig
-
-
 def metadata(data: dict[str, np.ndarray], scope: str, source: str) -> dict:
     """JSON-able description of the set: trials, splits, counts and fit residuals."""
     groups = scope_groups(scope)

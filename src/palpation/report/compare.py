@@ -130,30 +130,6 @@ def seed_stats(values) -> tuple[float, float, int]:
     return s["mean"], s["std"], s["n"]
 
 
-def num(v, digits: int = 4) -> str:
-    """A number at `digits` d.p.; integers with thousands separators; '–' for missing."""
-    if v is None or (isinstance(v, float) and math.isnan(v)):
-        return "–"
-    if isinstance(v, str):
-        return v
-    if float(v).is_integer() and digits == 0:
-        return f"{int(v):,}"
-    return f"{float(v):.{digits}f}"
-
-
-def signed(v, digits: int = 4) -> str:
-    if v is None or (isinstance(v, float) and math.isnan(v)):
-        return "–"
-    if digits == 0:
-        return f"{int(round(v)):+,}"
-    return f"{float(v):+.{digits}f}"
-
-
-def pm(mean: float, std: float, digits: int = 4) -> str:
-    return num(mean, digits) if (std is None or math.isnan(std) or std == 0) else \
-        f"{mean:.{digits}f} ± {std:.{digits}f}"
-
-
 @dataclass(frozen=True)
 class Gap:
     """One ours-vs-paper difference, for the explanations' conditions."""

@@ -11,10 +11,10 @@ import math
 
 import pandas as pd
 
-from palpation.report.compare import TITLES, Gap, Section, compare, num, pm, seed_stats, signed
+from palpation.report.compare import TITLES, Gap, Section, compare, seed_stats
+from palpation.report.markdown import markdown, num, pm, signed
 from palpation.report.paper import (CONFIG_TITLES, MAPS_PHOTO_THRESHOLD, MAPS_VIDEO_PHOTO_IOU, PAPER_DIGITS,
                                     SEED_SWEEP, TABLE3, TABLE4, TABLE4_MAPS)
-from palpation.report.tables import markdown
 
 NAMES = {"auroc": "AUROC", "ap": "AP", "fg_iou": "FG IoU", "bg_iou": "BG IoU", "chance": "chance", "mcc": "MCC",
          "f1": "F1", "precision": "Prec", "recall": "Rec", "d_bar_mm": "d̄ mm", "tp": "TP", "fp": "FP",
@@ -82,7 +82,7 @@ def _threshold_behaviour(config: str, g: pd.DataFrame) -> str:
     return text + "." if text else ""
 
 
-def seed_sweep(df: pd.DataFrame, k: float = 2.0) -> Section:
+def seed_sweep_section(df: pd.DataFrame, k: float = 2.0) -> Section:
     rows, gaps, bullets = [], [], []
     for config, g in df.groupby("config", sort=False):
         paper = SEED_SWEEP.get(config)
@@ -104,7 +104,7 @@ def seed_sweep(df: pd.DataFrame, k: float = 2.0) -> Section:
     return Section("seed_sweep", TITLES["seed_sweep"], body, bullets, gaps, set(df["config"]))
 
 
-def table3(df: pd.DataFrame, k: float = 2.0) -> Section:
+def table3_section(df: pd.DataFrame, k: float = 2.0) -> Section:
     metrics = ("fg_iou", "ap") + (("auroc",) if "auroc" in df.columns else ())
     rows, gaps, bullets = [], [], []
     for clip_len, g in df.groupby("clip_len"):
@@ -145,7 +145,7 @@ def _largest(diffs: dict[str, float], n: int = 3) -> str:
     return ", ".join(f"{NAMES[m]} {signed(diffs[m], 2)}" for m in top)
 
 
-def table4_markers(df: pd.DataFrame, sweep: pd.DataFrame | None = None, k: float = 2.0) -> Section:
+def table4_markers_section(df: pd.DataFrame, sweep: pd.DataFrame | None = None, k: float = 2.0) -> Section:
     """Best-of-five per configuration. A single instance has no std of its own: AP and the IoUs are judged
     against the seed sweep's spread (ours and the paper's), the only noise scale there is."""
     rows, gaps, bullets = [], [], []
@@ -175,7 +175,7 @@ def table4_markers(df: pd.DataFrame, sweep: pd.DataFrame | None = None, k: float
     return Section("table4_markers", TITLES["table4_markers"], body, bullets, gaps, set(df["config"]))
 
 
-def table4_maps(df: pd.DataFrame, photo: pd.DataFrame | None = None, pose_check: dict | None = None) -> Section:
+def table4_maps_section(df: pd.DataFrame, photo: pd.DataFrame | None = None, pose_check: dict | None = None) -> Section:
     cols = COUNTS + RATES + ("d_bar_mm",)
     rows, gaps, bullets = [], [], []
     for _, r in df.iterrows():
@@ -224,7 +224,7 @@ def table4_maps(df: pd.DataFrame, photo: pd.DataFrame | None = None, pose_check:
     return Section("table4_maps", TITLES["table4_maps"], body, bullets, gaps, set(df["config"]))
 
 
-def twin_ablation(df: pd.DataFrame, k: float = 2.0) -> Section:
+def twin_ablation_section(df: pd.DataFrame, k: float = 2.0) -> Section:
     """Which twin made the Sim set: the loop's final twin vs the calibrated twin alone (no paper row of
     its own; the paper's seed sweep is the calibrated reference twin)."""
     rows, gaps, bullets = [], [], []

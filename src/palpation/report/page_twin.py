@@ -11,8 +11,8 @@ import re
 import pandas as pd
 
 from palpation.camera import MM_PER_PX
-from palpation.report.compare import TITLES, Gap, Section, num, signed
-from palpation.report.tables import markdown
+from palpation.report.compare import TITLES, Gap, Section
+from palpation.report.markdown import markdown, num, signed
 from palpation.report.paper import CALIBRATION_MAE, DATASETS, TEST_SETS
 
 TEST_SET = {"A-to-A": "sim", "A-to-B": "silicone", "A-to-C": "meat", "C-to-B": "silicone"}  # SPEC §1.1

@@ -21,7 +21,7 @@ from palpation.io import save_text
 from palpation.report import page_training as training
 from palpation.report import page_twin as twin
 from palpation.report.compare import SOURCES, TITLES, Section, read_json, read_table
-from palpation.report.tables import markdown
+from palpation.report.markdown import markdown
 
 ORDER = ("data", "calibration", "loop", "seed_sweep", "table3", "table4_markers", "table4_maps", "twin_ablation")
 FIGURES = (  # (caption, path under the results root; a glob lists every match)
@@ -140,12 +140,12 @@ def sections(root: Path, k: float = 2.0) -> dict[str, Section | None]:
         "data": lambda: twin.data_sets(t["data"], t["seed_sweep"], t["table4_markers"]),
         "calibration": lambda: twin.calibration(t["calibration"]),
         "loop": lambda: twin.loop(t["loop"], loop_md.read_text() if loop_md.exists() else None),
-        "seed_sweep": lambda: training.seed_sweep(t["seed_sweep"], k),
-        "table3": lambda: training.table3(t["table3"], k),
-        "table4_markers": lambda: training.table4_markers(t["table4_markers"], t["seed_sweep"], k),
-        "table4_maps": lambda: training.table4_maps(t["table4_maps"], t["maps_photo"],
+        "seed_sweep": lambda: training.seed_sweep_section(t["seed_sweep"], k),
+        "table3": lambda: training.table3_section(t["table3"], k),
+        "table4_markers": lambda: training.table4_markers_section(t["table4_markers"], t["seed_sweep"], k),
+        "table4_maps": lambda: training.table4_maps_section(t["table4_maps"], t["maps_photo"],
                                                     read_json(root / "maps" / "silicone_pose_check.json")),
-        "twin_ablation": lambda: training.twin_ablation(t["twin_ablation"], k),
+        "twin_ablation": lambda: training.twin_ablation_section(t["twin_ablation"], k),
     }
     return {key: build[key]() if t[key] is not None else None for key in ORDER}
 

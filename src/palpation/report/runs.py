@@ -5,8 +5,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numpy as np
-
 SWEEP_COLUMNS = ("config", "seed", "auroc", "ap", "fg_iou", "bg_iou", "mcc", "f1", "precision", "recall", "chance")
 
 
@@ -33,7 +31,3 @@ def load_runs(root: str | Path, configs, clip_lens, seeds) -> list[dict]:
                                 "train rule (snakemake) or palpation.apps.train for them first")
     return runs
 
-
-def load_scores(run: dict) -> tuple[np.ndarray, np.ndarray]:
-    with np.load(Path(run["dir"]) / "scores.npz") as z:
-        return z["probs"], z["labels"]

@@ -1,33 +1,23 @@
-"""Seed sweep, Table 4 upper half and Table 3 as CSV frames and Markdown beside the paper (SPEC §15)."""
+"""The paper's tables as CSV frames and Markdown beside the paper's rows (SPEC §15): seed sweep, Table 3,
+Table 4 upper half (per marker) and lower half (vessel maps). The results page compares the same frames
+(report.page_training); cells are formatted by report.markdown."""
 
 from __future__ import annotations
 
 import pandas as pd
 
-from palpation.metrics.aggregate import best_of_five, summarise_seeds
-from palpation.report.paper import CONFIG_TITLES, PAPER_DIGITS, SEED_SWEEP, TABLE3, TABLE4
+from palpation.metrics.aggregate import best_of_five
+from palpation.report.markdown import markdown, num, pm, pm_seeds
+from palpation.report.paper import (CONFIG_TITLES, MAPS_PHOTO_THRESHOLD, PAPER_DIGITS, SEED_SWEEP, TABLE3, TABLE4,
+                                    TABLE4_MAPS)
 from palpation.report.runs import SWEEP_COLUMNS
 
 TABLE4_COLUMNS = ("config", "seed", "tp", "fp", "fn", "tn", "mcc", "f1", "precision", "recall",
                   "fg_iou", "bg_iou", "ap", "auroc")
 ABLATION_COLUMNS = ("clip_len", "seed", "fg_iou", "ap")
-
-
-def markdown(header: list[str], rows: list[list]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
-    return "\n".join(lines) + "\n"
-
-
-def pm(values, digits: int = 4) -> str:
-    s = summarise_seeds(values)
-    std = "–" if s["n"] < 2 else f"{s['std']:.{digits}f}"
-    return f"{s['mean']:.{digits}f} ± {std}"
-
-
-def _paper_pm(mean: float, std: float, digits: int = 4) -> str:
-    """The paper's values at the precision it printed them (A-to-A sweep: 3 d.p.; SPEC §15.1)."""
-    return f"{mean:.{digits}f}" if std == 0 else f"{mean:.{digits}f} ± {std:.{digits}f}"
+MAPS_COLUMNS = ("config", "threshold", "threshold_rule", "tp", "fp", "fn", "tn", "mcc", "f1", "precision", "recall",
+                "fg_iou", "bg_iou", "ap", "d_bar_mm")
+COUNTS = ("tp", "fp", "fn", "tn")
 
 
 def seed_sweep(runs: list[dict]) -> pd.DataFrame:
@@ -39,15 +29,15 @@ def seed_sweep_markdown(df: pd.DataFrame, profile: str) -> str:
     rows = []
     for config, g in df.groupby("config", sort=False):
         rows.append([f"{config} ({CONFIG_TITLES.get(config, config)}), ours, {len(g)} seeds"]
-                    + [pm(g[m]) + f" ({g[m].min():.4f}–{g[m].max():.4f})" for m in metrics])
+                    + [pm_seeds(g[m]) + f" ({g[m].min():.4f}–{g[m].max():.4f})" for m in metrics])
         if config in SEED_SWEEP:
-            rows.append([f"{config}, paper, 5 seeds"] + [_paper_pm(*SEED_SWEEP[config][m], PAPER_DIGITS.get(config, 4))
+            rows.append([f"{config}, paper, 5 seeds"] + [pm(*SEED_SWEEP[config][m], PAPER_DIGITS.get(config, 4))
                                                           for m in metrics])
     return (f"# Seed sweep ({profile} profile): mean ± sample std (min–max)\n\n"
             + markdown(["Config", "AUROC", "AP", "FG IoU", "BG IoU", "Chance"], rows))
 
 
-def table4(runs: list[dict]) -> pd.DataFrame:
+def table4_markers(runs: list[dict]) -> pd.DataFrame:
     """Best-of-five per configuration: highest AP, AUROC breaking ties."""
     by_config: dict[str, list] = {}
     for r in runs:
@@ -56,7 +46,7 @@ def table4(runs: list[dict]) -> pd.DataFrame:
     return pd.DataFrame([{k: b[k] for k in TABLE4_COLUMNS} for b in best], columns=list(TABLE4_COLUMNS))
 
 
-def table4_markdown(df: pd.DataFrame, profile: str) -> str:
+def table4_markers_markdown(df: pd.DataFrame, profile: str) -> str:
     cols = ("tp", "fp", "fn", "tn", "mcc", "f1", "precision", "recall", "fg_iou", "bg_iou", "ap")
     fmt = lambda k, v: str(int(v)) if k in ("tp", "fp", "fn", "tn") else f"{v:.2f}"  # noqa: E731
     rows = []
@@ -78,12 +68,55 @@ def table3_markdown(df: pd.DataFrame, profile: str) -> str:
     rows = []
     for clip_len, g in df.groupby("clip_len"):
         rows.append([f"{clip_len}, ours ({len(g)} seeds)",
-                     pm(g["fg_iou"]) + f" ({g['fg_iou'].min():.4f}–{g['fg_iou'].max():.4f})",
-                     pm(g["auroc"]), pm(g["ap"])])
+                     pm_seeds(g["fg_iou"]) + f" ({g['fg_iou'].min():.4f}–{g['fg_iou'].max():.4f})",
+                     pm_seeds(g["auroc"]), pm_seeds(g["ap"])])
         if clip_len in TABLE3:
             p = TABLE3[clip_len]
             rows.append([f"{clip_len}, paper (3 seeds)",
-                         _paper_pm(*p["fg_iou"]) + f" ({p['fg_range'][0]:.4f}–{p['fg_range'][1]:.4f})",
-                         _paper_pm(*p["auroc"]), _paper_pm(*p["ap"])])
+                         pm(*p["fg_iou"]) + f" ({p['fg_range'][0]:.4f}–{p['fg_range'][1]:.4f})",
+                         pm(*p["auroc"]), pm(*p["ap"])])
     return (f"# Table 3 ({profile} profile): clip length, A-to-B, mean ± sample std\n\n"
             + markdown(["L", "FG IoU (range)", "AUROC", "AP"], rows))
+
+
+def table4_maps_row(config: str, op, stats: dict) -> dict:
+    """One row of Table 4 lower half from a configuration's operating point and map statistics."""
+    r0 = stats["r0"]
+    return {"config": config, "threshold": op.threshold, "threshold_rule": op.rule,
+            **{k: r0[k] for k in ("tp", "fp", "fn", "tn", "mcc", "f1", "precision", "recall", "fg_iou", "bg_iou",
+                                  "ap")},
+            "d_bar_mm": stats["d_bar_mm"]}
+
+
+def table4_maps(rows: list[dict]) -> pd.DataFrame:
+    return pd.DataFrame(rows, columns=list(MAPS_COLUMNS))
+
+
+def _maps_cells(v: dict) -> str:
+    """Counts with thousands separators, rates at 2 d.p., d-bar in bold, the threshold at 4 d.p."""
+    return (" | ".join(num(v[k], 0) for k in COUNTS) + " | "
+            + " | ".join(num(v[k], 2) for k in ("mcc", "f1", "precision", "recall", "fg_iou", "bg_iou", "ap"))
+            + f" | **{num(v['d_bar_mm'], 2)}** | {num(v['threshold'], 4)} | {v['threshold_rule']} |")
+
+
+def table4_maps_markdown(df: pd.DataFrame, profile: str, notes: list[str] | None = None,
+                         photo: pd.DataFrame | None = None) -> str:
+    """Ours and the paper's row by row; d-bar and threshold in bold columns of their own."""
+    head = ("| Config | source | TP | FP | FN | TN | MCC | F1 | Prec | Rec | FG | BG | AP | **d̄ mm** | thr | rule |\n"
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n")
+    lines = []
+    for _, r in df.iterrows():
+        rows = [("ours", r.to_dict())] + ([("paper", TABLE4_MAPS[r["config"]])] if r["config"] in TABLE4_MAPS else [])
+        lines += [f"| {r['config']} | {src} | " + _maps_cells(v) for src, v in rows]
+    text = (f"# Table 4, lower half ({profile} profile): vessel map per pixel, exact pixels, operating point "
+            f"precision >= 0.9 at 3 mm\n\n" + head + "\n".join(lines) + "\n")
+    if photo is not None and len(photo):
+        text += "\n## Silicone against the photo truth\n\n" + head
+        for _, r in photo.iterrows():
+            paper_thr = MAPS_PHOTO_THRESHOLD.get(r["config"].split("/")[0])
+            text += f"| {r['config']} | ours | " + _maps_cells(r.to_dict()) + "\n"
+            if paper_thr is not None:
+                text += f"| {r['config']} | paper | " + " | ".join(["–"] * 12) + f" | {paper_thr:.4f} | |\n"
+    if notes:
+        text += "\n" + "\n".join(f"* {n}" for n in notes) + "\n"
+    return text

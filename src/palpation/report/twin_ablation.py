@@ -8,7 +8,7 @@ import pandas as pd
 
 from palpation.metrics.aggregate import summarise_seeds
 from palpation.report.paper import CONFIG_TITLES, SEED_SWEEP
-from palpation.report.tables import markdown, pm
+from palpation.report.markdown import markdown, pm_seeds
 
 COLUMNS = ("dataset_twin", "experiment", "n_seeds", "auroc_mean", "auroc_std", "ap_mean", "ap_std",
            "fg_iou_mean", "bg_iou_mean")
@@ -39,7 +39,7 @@ def twin_ablation_markdown(runs_by_twin: dict[str, list[dict]], profile: str) ->
             mine = [r for r in runs if r["config"] == config]
             if mine:
                 rows.append([f"{config} ({CONFIG_TITLES.get(config, config)})", f"{twin} twin",
-                             len(mine)] + [pm([r[m] for r in mine]) for m in METRICS])
+                             len(mine)] + [pm_seeds([r[m] for r in mine]) for m in METRICS])
         if config in SEED_SWEEP:
             rows.append([config, "paper (calibrated twin)", 5]
                         + [f"{SEED_SWEEP[config][m][0]:.4f} ± {SEED_SWEEP[config][m][1]:.4f}" for m in METRICS])

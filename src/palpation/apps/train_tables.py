@@ -1,6 +1,6 @@
 """Hydra entry point: gather training runs into tables and Fig. 6 (SPEC §11, §15).
 
-    python -m palpation.apps.report runs_root=results/train out_dir=results/report profile=quick
+    python -m palpation.apps.train_tables runs_root=results/train out_dir=results/report profile=quick
 Writes seed_sweep.{csv,md}, table4_markers.{csv,md}, clip_len_ablation.csv, table3_clip_len.md,
 fig6_pr_curves.{png,pdf} and bench_train.json into out_dir.
 """
@@ -14,11 +14,12 @@ import hydra
 import matplotlib.pyplot as plt
 from omegaconf import DictConfig, OmegaConf
 
+from palpation.figures.pr_curves import pr_figure
 from palpation.io import atomic_path, save_figure, save_json, save_text
 from palpation.metrics.aggregate import pr_curve
+from palpation.metrics.scores import load_scores
 from palpation.report import tables
-from palpation.report.pr_figure import pr_figure
-from palpation.report.runs import load_runs, load_scores
+from palpation.report.runs import load_runs
 
 log = logging.getLogger(__name__)
 
@@ -35,14 +36,15 @@ def run(cfg: DictConfig) -> dict:
     sweep = tables.seed_sweep(runs)
     save_csv(sweep, out / "seed_sweep.csv")
     save_text(out / "seed_sweep.md", tables.seed_sweep_markdown(sweep, profile))
-    t4 = tables.table4(runs)
+    t4 = tables.table4_markers(runs)
     save_csv(t4, out / "table4_markers.csv")
-    save_text(out / "table4_markers.md", tables.table4_markdown(t4, profile))
+    save_text(out / "table4_markers.md", tables.table4_markers_markdown(t4, profile))
 
     curves, chance = {}, {}
     for config in c["experiments"]:
         mine = [r for r in runs if r["config"] == config]
-        curves[config] = [pr_curve(*load_scores(r)) for r in mine]
+        scores = [load_scores(Path(r["dir"]) / "scores.npz") for r in mine]
+        curves[config] = [pr_curve(s.probs, s.labels) for s in scores]
         chance[config] = sum(r["chance"] for r in mine) / len(mine)
     fig = pr_figure(curves, chance, f"{profile} profile, L = {c['clip_len']}, seeds {c['seeds']}")
     save_figure(fig, out / "fig6_pr_curves")
@@ -63,7 +65,7 @@ def run(cfg: DictConfig) -> dict:
     return outputs
 
 
-@hydra.main(version_base="1.3", config_path="../../../conf", config_name="report")
+@hydra.main(version_base="1.3", config_path="../../../conf", config_name="train_tables")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

@@ -1,17 +1,17 @@
-"""The report app on hand-made run folders: CSV columns, best-of-five, Markdown beside the paper, Fig. 6."""
+"""The train_tables app on hand-made run folders: CSV columns, best-of-five, Markdown beside the paper, Fig. 6."""
 
 import json
 
 import pandas as pd
 from hydra import compose, initialize_config_dir
 
-from palpation.apps.report import run
+from palpation.apps.train_tables import run
 from palpation.paths import REPO_ROOT
 
 CONFIGS = ["A-to-A", "A-to-B", "A-to-C", "C-to-B"]
 
 
-def test_report_tables_and_figure(tmp_path, fake_run):
+def test_train_tables_and_figure(tmp_path, fake_run):
     root, out = tmp_path / "train", tmp_path / "report"
     for c in CONFIGS:
         for s in (0, 1):
@@ -20,7 +20,7 @@ def test_report_tables_and_figure(tmp_path, fake_run):
         for s in (0, 1):
             fake_run(root, "A-to-B", clip_len, s)
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
-        cfg = compose(config_name="report", overrides=[
+        cfg = compose(config_name="train_tables", overrides=[
             f"runs_root={root}", f"out_dir={out}", "seeds=[0,1]", "profile=quick",
             "ablation.clip_lens=[1,3,5]", "ablation.seeds=[0,1]"])
     assert run(cfg) == {"runs": 8, "ablation_runs": 6}
