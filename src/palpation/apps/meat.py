@@ -14,6 +14,7 @@ from pathlib import Path
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
+from palpation.config_check import app_main
 from palpation.io import save_figure, save_json, save_npz
 from palpation.markers.template import rest_template
 from palpation.realdata.meat import build_meat, metadata, overview_figure
@@ -70,6 +71,7 @@ def _track(cfg: DictConfig, meta: dict) -> None:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="meat")
+@app_main("meat")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

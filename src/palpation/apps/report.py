@@ -14,6 +14,7 @@ import hydra
 import matplotlib.pyplot as plt
 from omegaconf import DictConfig, OmegaConf
 
+from palpation.config_check import app_main
 from palpation.io import atomic_path, save_figure, save_json, save_text
 from palpation.metrics.aggregate import pr_curve
 from palpation.report import tables
@@ -64,6 +65,7 @@ def run(cfg: DictConfig) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="report")
+@app_main("report")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

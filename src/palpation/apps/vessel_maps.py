@@ -20,6 +20,7 @@ import pandas as pd
 from omegaconf import DictConfig, OmegaConf
 
 from palpation import tracking
+from palpation.config_check import app_main
 from palpation.io import atomic_path, save_json, save_npz, save_text
 from palpation.mapping import figures
 from palpation.mapping.pipeline import TEST_DATASET, MapSettings, config_maps
@@ -183,6 +184,7 @@ def _track(c: dict, table: pd.DataFrame, out: Path) -> None:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="vessel_maps")
+@app_main("vessel_maps")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

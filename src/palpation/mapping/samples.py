@@ -21,6 +21,7 @@ import numpy as np
 from palpation.graph.clips import ClipSet
 from palpation.graph.layout import rest_layout
 from palpation.graph.sources import Sequences
+from palpation.io import read_npz
 from palpation.markers.lattice import N_MARKERS
 
 MAX_LABEL_MISMATCH = 0.01  # Sim labels are recomputed at load time; real labels must agree exactly
@@ -62,11 +63,8 @@ def load_scores(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"scores {path} not found; run the train rule for this configuration first")
-    with np.load(path) as z:
-        missing = [k for k in ("probs", "labels") if k not in z]
-        if missing:
-            raise ValueError(f"{path}: missing {missing}; expected scores.npz from palpation.model.job")
-        probs, labels = z["probs"].astype(np.float32).ravel(), z["labels"].astype(np.int8).ravel()
+    z = read_npz(path, ("probs", "labels"), "rerun the train rule for this configuration (palpation.model.job)")
+    probs, labels = z["probs"].astype(np.float32).ravel(), z["labels"].astype(np.int8).ravel()
     if probs.size == 0:
         raise ValueError(f"{path}: empty prediction set (0 scores); re-run the evaluation of this configuration")
     if probs.shape != labels.shape:

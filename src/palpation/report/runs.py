@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
+
+from palpation.io import read_json, read_npz
 
 SWEEP_COLUMNS = ("config", "seed", "auroc", "ap", "fg_iou", "bg_iou", "mcc", "f1", "precision", "recall", "chance")
 
@@ -25,7 +26,7 @@ def load_runs(root: str | Path, configs, clip_lens, seeds) -> list[dict]:
                 if not path.exists():
                     missing.append(str(path))
                     continue
-                m = json.loads(path.read_text())
+                m = read_json(path, "rerun the train rule for this run")
                 runs.append({"config": config, "clip_len": clip_len, "seed": seed, "dir": str(path.parent),
                              **m["test"], "train_seconds": m.get("train_seconds"), "device": m.get("device")})
     if missing:
@@ -35,5 +36,5 @@ def load_runs(root: str | Path, configs, clip_lens, seeds) -> list[dict]:
 
 
 def load_scores(run: dict) -> tuple[np.ndarray, np.ndarray]:
-    with np.load(Path(run["dir"]) / "scores.npz") as z:
-        return z["probs"], z["labels"]
+    z = read_npz(Path(run["dir"]) / "scores.npz", ("probs", "labels"), "rerun the train rule for this run")
+    return z["probs"], z["labels"]
