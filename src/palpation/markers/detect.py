@@ -93,7 +93,8 @@ def load_gray(path: str | os.PathLike) -> np.ndarray:
     """Read an image file as 8-bit grayscale; a missing or unreadable file raises FileNotFoundError."""
     image = cv2.imread(os.fspath(path), cv2.IMREAD_GRAYSCALE)
     if image is None:
-        raise FileNotFoundError(f"cannot read image {path}: missing or not an image file")
+        raise FileNotFoundError(f"cannot read image {path}: missing or not an image file; restore it or "
+                                "remove it from the photo folder")
     return image
 
 
