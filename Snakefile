@@ -18,6 +18,8 @@ include: "workflow/rules/train.smk"
 include: "workflow/rules/maps.smk"
 include: "workflow/rules/results_page.smk"
 
+from palpation.killed_jobs import killed_outputs  # a killed forced rerun's missing outputs (see there)
+
 
 rule all:
     default_target: True
@@ -34,6 +36,7 @@ rule all:
         TWIN_ABLATION_FILES,  # common.smk: empty where the profile skips the dataset-twin ablation
         rules.vessel_maps.output,
         rules.results_page.output,
+        killed_outputs(),
 
 
 # The loop's self-test (hidden effects in twin-made sets): snakemake --cores 2 selftest

@@ -8,6 +8,8 @@ from pathlib import Path
 
 from hydra import compose, initialize_config_dir
 
+from palpation.model import config as _train_schema  # noqa: F401 (registers base_train, which train.yaml extends)
+
 
 @dataclass(frozen=True)
 class Experiment:

@@ -10,11 +10,14 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import errno
 import io
 import json
 import os
 import socket
 import tempfile
+import zipfile
+import zlib
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -45,21 +48,37 @@ def remove_stale_temps(path: str | os.PathLike) -> list[Path]:
     return removed
 
 
+_WRITE_FIXES = {errno.ENOSPC: "free space on its file system (or move PALPATION_RESULTS elsewhere)",
+                errno.EDQUOT: "free space within your quota (or move PALPATION_RESULTS elsewhere)",
+                errno.EROFS: "the file system is read-only: set PALPATION_RESULTS to a writable folder",
+                errno.EACCES: "make the folder writable, or set PALPATION_RESULTS to a writable folder",
+                errno.EPERM: "make the folder writable, or set PALPATION_RESULTS to a writable folder"}
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[Path]:
-    """Yield a temporary path next to `path`; rename it onto `path` only if the block succeeds."""
+    """Yield a temporary path next to `path`; rename it onto `path` only if the block succeeds.
+
+    A failed write (disk full, read-only or foreign folder) raises the same OSError type with a
+    one-line message naming `path` and the fix."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_temps(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=_temp_prefix(path), suffix=suffix or path.suffix)
-    os.close(fd)
-    tmp_path = Path(tmp)
+    tmp_path = None
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        remove_stale_temps(path)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=_temp_prefix(path), suffix=suffix or path.suffix)
+        os.close(fd)
+        tmp_path = Path(tmp)
         yield tmp_path
         os.chmod(tmp_path, 0o666 & ~_UMASK)  # mkstemp creates 0600; finished files get normal modes
         os.replace(tmp_path, path)
+    except OSError as exc:
+        if exc.errno not in _WRITE_FIXES:
+            raise
+        raise type(exc)(exc.errno, f"cannot write {path}: {os.strerror(exc.errno)}; "
+                                   f"{_WRITE_FIXES[exc.errno]}") from None
     finally:
-        if tmp_path.exists():
+        if tmp_path is not None and tmp_path.exists():
             tmp_path.unlink()
 
 
@@ -68,9 +87,73 @@ def save_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
         np.savez_compressed(tmp, **arrays)
 
 
+def read_npz(path: str | os.PathLike, keys: tuple[str, ...] = (), fix: str = "rerun the rule that writes it",
+             finite: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
+    """All arrays of an npz, or a one-line ValueError naming `path` and `fix` when it is missing keys,
+    truncated or corrupt, or when one of the `finite` arrays holds NaN/inf."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path} not found; {fix}")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+        raise ValueError(f"{path} is not a readable npz archive ({type(exc).__name__}: {exc}); {fix}") from None
+    missing = [k for k in keys if k not in arrays]
+    if missing:
+        raise ValueError(f"{path} lacks the arrays {missing}; {fix}")
+    for key in finite:
+        bad = np.size(arrays[key]) - np.count_nonzero(np.isfinite(arrays[key]))
+        if bad:
+            raise ValueError(f"{path}: `{key}` holds {bad} NaN/inf values; {fix}")
+    return arrays
+
+
+def read_json(path: str | os.PathLike, fix: str = "rerun the rule that writes it") -> Any:
+    """A JSON file's content, or a one-line error naming `path` and `fix` (missing, truncated, invalid)."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path} not found; {fix}")
+    try:
+        return json.loads(path.read_text())
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise ValueError(f"{path} is not valid JSON ({exc}); {fix}") from None
+
+
+def strict_json(obj: Any) -> tuple[Any, list[str]]:
+    """`obj` with every NaN/inf float replaced by None (JSON null), and the paths replaced."""
+    replaced: list[str] = []
+
+    def clean(v: Any, where: str) -> Any:
+        if isinstance(v, dict):
+            return {k: clean(x, f"{where}.{k}" if where else str(k)) for k, x in v.items()}
+        if isinstance(v, (list, tuple)):
+            return [clean(x, f"{where}[{i}]") for i, x in enumerate(v)]
+        v = _json_default(v) if isinstance(v, (np.generic, np.ndarray, Path)) else v
+        if isinstance(v, (list, dict)):
+            return clean(v, where)
+        if isinstance(v, float) and not np.isfinite(v):
+            replaced.append(where)
+            return None
+        return v
+
+    return clean(obj, ""), replaced
+
+
 def save_json(path: str | os.PathLike, obj: Any) -> None:
+    """Strict JSON (no bare NaN): a non-finite float is written as null and, in a mapping, its path is
+    listed under `non_finite` so that a reader can tell a missing value from an undefined one."""
+    obj, replaced = strict_json(obj)
+    if replaced and isinstance(obj, dict):
+        obj["non_finite"] = replaced
+    text = json.dumps(obj, indent=2, sort_keys=True, default=_json_default, allow_nan=False) + "\n"
     with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(obj, indent=2, sort_keys=True, default=_json_default) + "\n")
+        tmp.write_text(text)
+
+
+def save_bytes(path: str | os.PathLike, data: bytes) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
 
 
 def save_text(path: str | os.PathLike, text: str) -> None:

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from palpation.io import save_json, save_npz
+from palpation.io import read_npz, save_json, save_npz
 from palpation.markers.lattice import N_MARKERS
 
 FORMAT_NAME = "palpation.measured_markers"
@@ -207,11 +207,7 @@ def load_measured_set(path: str | os.PathLike) -> MeasuredSet:
         if not p.exists():
             raise FileNotFoundError(f"{p}: missing; a measured set is a pair <name>.npz + <name>.json "
                                     "(see docs/measured_format.md)")
-    try:
-        with np.load(npz_path, allow_pickle=False) as data:
-            arrays = {k: data[k] for k in data.files}
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"{npz_path}: not a readable npz archive ({exc}); re-save it") from None
+    arrays = read_npz(npz_path, fix="re-save it with palpation.measured.save_measured_set (or rerun its rule)")
     _check_arrays(arrays, npz_path)
     try:
         meta = json.loads(json_path.read_text())

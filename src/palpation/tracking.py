@@ -35,6 +35,31 @@ def tracking_uri() -> str:
     return f"sqlite:///{(results_dir() / 'mlflow.db').resolve()}"
 
 
+def check_store() -> None:
+    """Fail at app start, not after the work, when the SQLite store cannot be used: not a database,
+    or the file or its folder not writable. Other stores (a server) are left to MLflow."""
+    uri = tracking_uri()
+    if not uri.startswith("sqlite:///"):
+        return
+    db = Path(uri[len("sqlite:///"):])
+    origin = "MLFLOW_TRACKING_URI" if os.environ.get("MLFLOW_TRACKING_URI") else "the default store"
+    fix = f"move or delete it, or set MLFLOW_TRACKING_URI to a usable store ({origin} is {uri})"
+    folder = next((p for p in (db, *db.parents) if p.exists()), db.anchor)
+    if not db.exists():
+        if not os.access(folder, os.W_OK):
+            raise PermissionError(f"MLflow store {db} cannot be created: {folder} is not writable; {fix}")
+        return
+    if not os.access(db, os.W_OK) or not os.access(db.parent, os.W_OK):
+        raise PermissionError(f"MLflow store {db} (or its folder) is not writable; {fix}")
+    import sqlite3
+
+    try:
+        with contextlib.closing(sqlite3.connect(f"file:{db}?mode=ro", uri=True)) as con:
+            con.execute("select count(*) from sqlite_master").fetchone()
+    except sqlite3.DatabaseError as exc:
+        raise ValueError(f"MLflow store {db} is not a usable SQLite database ({exc}); {fix}") from None
+
+
 def artifact_root(stage: str) -> str:
     return (results_dir() / "mlartifacts" / stage).resolve().as_uri()
 

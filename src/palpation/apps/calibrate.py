@@ -28,6 +28,7 @@ from palpation.calibration.outputs import write_fitted, write_table
 from palpation.calibration.study import (STUDY_DB, at_bounds, best_trial, build_objective, prepare,
                                          run_study, study_key, trial_rows)
 from palpation.calibration.validate import validate
+from palpation.config_check import app_main
 from palpation.figures.calibration import plot_fig4, plot_history
 from palpation.io import save_text
 from palpation.markers.template import rest_template
@@ -158,6 +159,7 @@ def run(cfg: DictConfig) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="calibrate")
+@app_main("calibrate")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

@@ -10,6 +10,7 @@ import logging
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
+from palpation.config_check import app_main
 from palpation.io import save_text
 from palpation.realdata.summary import specs_from_mapping, summary_table, to_markdown
 
@@ -25,6 +26,7 @@ def run(cfg: DictConfig) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="data_summary")
+@app_main("data_summary")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

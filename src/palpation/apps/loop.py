@@ -23,6 +23,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from palpation.calibration.objective import marker_mae_px
+from palpation.config_check import app_main
 from palpation.io import save_json, save_text
 from palpation.figures import loop as figures
 from palpation.loop import report
@@ -161,6 +162,7 @@ def _plain(r: dict) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="loop")
+@app_main("loop")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

@@ -15,6 +15,7 @@ import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from palpation.figures.realdata import meat_overview
+from palpation.config_check import app_main
 from palpation.io import save_figure, save_json, save_npz
 from palpation.markers.template import rest_template
 from palpation.realdata.meat import build_meat, metadata
@@ -71,6 +72,7 @@ def _track(cfg: DictConfig, meta: dict) -> None:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="meat")
+@app_main("meat")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

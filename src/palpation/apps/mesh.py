@@ -7,6 +7,7 @@ import logging
 import hydra
 from omegaconf import DictConfig
 
+from palpation.config_check import app_main
 import palpation.twin.config  # noqa: F401  (registers base_twin / base_mesh)
 from palpation.io import save_json
 from palpation.twin.mesh import build_sensor_mesh
@@ -25,6 +26,7 @@ def run(cfg: DictConfig) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="mesh")
+@app_main("mesh")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

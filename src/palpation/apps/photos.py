@@ -14,6 +14,7 @@ import hydra
 import pandas as pd
 from omegaconf import DictConfig, OmegaConf
 
+from palpation.config_check import app_main
 from palpation.io import save_json, save_text
 from palpation.markers.detect import RatioDetector
 from palpation.markers.photoset import list_photos, measure_photos, reference_pipeline_baselines
@@ -101,6 +102,7 @@ def _track(cfg: DictConfig, rows: list[dict], summary: dict) -> None:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="photos")
+@app_main("photos")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

@@ -14,6 +14,7 @@ from pathlib import Path
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
+from palpation.config_check import app_main
 from palpation.paths import REPO_ROOT
 from palpation.report.results_page import build_page, write_page
 from palpation.tracking import git_commit
@@ -44,6 +45,7 @@ def run(cfg: DictConfig) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="results_page")
+@app_main("results_page")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

@@ -19,6 +19,8 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from palpation.figures.realdata import silicone_overview
+from palpation.camera import video_to_sensor_px
+from palpation.config_check import app_main
 from palpation.io import save_figure, save_json, save_npz
 from palpation.markers.template import rest_template
 from palpation.realdata import silicone as sil
@@ -116,6 +118,7 @@ def _track(cfg: DictConfig, stage: str, metrics: dict) -> None:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="silicone")
+@app_main("silicone")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

@@ -15,6 +15,7 @@ import hydra
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
+from palpation.config_check import app_main
 from palpation.twin.config import REF_LENGTH_SCALE, TwinConfig, from_reference_units
 from palpation.twin.mesh import SensorMesh
 from palpation.twin.output import write_outputs
@@ -92,6 +93,9 @@ def run(cfg: DictConfig) -> dict:
                  len(rec.markers), rec.contact.sum(), rec.labels.mean())
     for bad in failed:
         log.warning("FAILED %s (%s) by frame %d: %s", bad.name, bad.kind, bad.detected_at_frame, bad.params)
+    if requests and not records:  # nothing usable: fail the job, the manifest says which diverged
+        raise ValueError(f"all {len(failed)} trajectories diverged, none written (failures listed in {manifest}); "
+                         "check the twin's stiffness and time step (twin.material.E, twin.contact.k_n, twin.integrator.dt)")
     if cfg.track:
         from palpation.tracking import log_metrics, start_run
 
@@ -101,6 +105,7 @@ def run(cfg: DictConfig) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="simulate")
+@app_main("simulate")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

@@ -14,6 +14,7 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
+from palpation.config_check import app_main
 from palpation.model.config import ModelConfig, TrainConfig
 from palpation.model.job import TrainJob, run_job
 
@@ -52,6 +53,7 @@ def run(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="train")
+@app_main("train")
 def main(cfg: DictConfig) -> float:
     metrics = run(cfg)
     return metrics["test"]["ap"]  # for sweepers that optimise

@@ -15,6 +15,7 @@ import matplotlib.pyplot as plt
 from omegaconf import DictConfig, OmegaConf
 
 from palpation.figures.pr_curves import pr_figure
+from palpation.config_check import app_main
 from palpation.io import atomic_path, save_figure, save_json, save_text
 from palpation.metrics.aggregate import pr_curve
 from palpation.metrics.scores import load_scores
@@ -66,6 +67,7 @@ def run(cfg: DictConfig) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="train_tables")
+@app_main("train_tables")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

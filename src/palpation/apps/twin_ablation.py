@@ -13,6 +13,7 @@ from pathlib import Path
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
+from palpation.config_check import app_main
 from palpation.io import atomic_path, save_text
 from palpation.report.runs import load_runs
 from palpation.report.twin_ablation import twin_ablation, twin_ablation_markdown
@@ -34,6 +35,7 @@ def run(cfg: DictConfig) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="twin_ablation")
+@app_main("twin_ablation")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

@@ -21,6 +21,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from palpation import tracking
 from palpation.figures import maps as figures
+from palpation.config_check import app_main
 from palpation.io import atomic_path, save_json, save_npz, save_text
 from palpation.mapping import config as maps_config  # noqa: F401 (registers the schema base_vessel_maps)
 from palpation.mapping.pipeline import TEST_DATASET, MapSettings, config_maps
@@ -188,6 +189,7 @@ def _track(c: dict, table: pd.DataFrame, out: Path) -> None:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="vessel_maps")
+@app_main("vessel_maps")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from palpation.io import read_npz
 from palpation.markers.lattice import N_MARKERS
 
 SPLITS = ("train", "val", "test", "all")
@@ -52,21 +53,31 @@ def split_sorted(ids: list, split: str, fractions=(0.7, 0.85)) -> list:
 
 
 def sim_trajectory_files(manifest: str | Path) -> list[Path]:
-    """Trajectory files named by the manifest (`trajectories`/`files` list of names or {file|path}),
-    falling back to every `*.npz` beside it."""
+    """The trajectory files the manifest names (`trajectories`/`files`: names or {file|path}), and
+    only those: other npz files in the folder (a previous run's) are never read. An empty list (every
+    trajectory of the run diverged) is refused."""
     manifest = Path(manifest)
     if not manifest.exists():
         raise FileNotFoundError(f"Sim manifest {manifest} not found; run the simulate_dataset rule first")
-    meta = json.loads(manifest.read_text())
+    try:
+        meta = json.loads(manifest.read_text())
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"Sim manifest {manifest} is not readable JSON ({exc}); rerun the simulate_dataset "
+                         "rule to rewrite it") from None
     entries = meta.get("trajectories", meta.get("files")) if isinstance(meta, dict) else meta
-    if entries:
-        names = [e if isinstance(e, str) else e.get("file", e.get("path")) for e in entries]
-        files = [manifest.parent / n for n in names]
-    else:
-        files = sorted(p for p in manifest.parent.glob("*.npz"))
+    if not isinstance(entries, list) or not entries:
+        failed = len(meta.get("failed", [])) if isinstance(meta, dict) else 0
+        raise ValueError(f"Sim manifest {manifest} lists no trajectory files ({failed} failed); rerun the "
+                         "simulate_dataset rule (check its log for diverged environments)")
+    names = [e if isinstance(e, str) else e.get("file", e.get("path")) if isinstance(e, dict) else None
+             for e in entries]
+    if not all(isinstance(n, str) for n in names):
+        raise ValueError(f"Sim manifest {manifest}: every entry needs a file name; rerun the simulate_dataset rule")
+    files = [manifest.parent / n for n in names]
     missing = [str(f) for f in files if not f.exists()]
-    if missing or not files:
-        raise FileNotFoundError(f"Sim manifest {manifest}: trajectory files missing: {missing[:3] or 'none listed'}")
+    if missing:
+        raise FileNotFoundError(f"Sim manifest {manifest}: trajectory files missing: {missing[:3]}; rerun the "
+                                "simulate_dataset rule")
     return files
 
 
@@ -75,13 +86,11 @@ def load_sim(manifest: str | Path, split: str, stride: int = SIM_STRIDE) -> Sequ
     ids = split_sorted(list(files), split)
     markers, centreline, contact = [], [], []
     for sid in ids:
-        with np.load(files[sid]) as z:
-            for key in ("markers", "centreline_px", "contact"):
-                if key not in z:
-                    raise ValueError(f"{files[sid]}: missing key '{key}' (the twin runner writes it)")
-            markers.append(z["markers"].astype(np.float32))
-            centreline.append(z["centreline_px"].astype(np.float32))
-            contact.append(z["contact"].astype(bool))
+        z = read_npz(files[sid], ("markers", "centreline_px", "contact"), "rerun the simulate_dataset rule",
+                     finite=("markers", "centreline_px"))
+        markers.append(z["markers"].astype(np.float32))
+        centreline.append(z["centreline_px"].astype(np.float32))
+        contact.append(z["contact"].astype(bool))
     return Sequences(f"sim/{split}", ids, markers, stride, centreline=centreline, contact=contact)
 
 
@@ -89,8 +98,8 @@ def load_silicone(path: str | Path) -> Sequences:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"Silicone data {path} not found; run the real-data extraction rule first")
-    with np.load(path) as z:
-        markers, labels = z["markers"].astype(np.float32), z["labels"].astype(np.int8)
+    z = read_npz(path, ("markers", "labels"), "rerun the silicone_set rule", finite=("markers",))
+    markers, labels = z["markers"].astype(np.float32), z["labels"].astype(np.int8)
     if markers.ndim != 4 or labels.shape != markers.shape[:3]:
         raise ValueError(f"{path}: expected markers (N,T,127,2) and labels (N,T,127), got "
                          f"{markers.shape} and {labels.shape}")
@@ -115,8 +124,8 @@ def load_meat(path: str | Path, split: str) -> Sequences:
     if split not in ("train", "val", "all"):
         raise ValueError(f"Meat split must be train, val or all, got '{split}'")
     trials = json.loads(layout.read_text())["trials"]
-    with np.load(path) as z:
-        markers, labels, offsets = z["markers"].astype(np.float32), z["labels"].astype(np.int8), z["trial_offsets"]
+    z = read_npz(path, ("markers", "labels", "trial_offsets"), "rerun the meat_set rule", finite=("markers",))
+    markers, labels, offsets = z["markers"].astype(np.float32), z["labels"].astype(np.int8), z["trial_offsets"]
     if len(offsets) != len(trials) + 1 or offsets[-1] != len(markers):
         raise ValueError(f"{path}: trial_offsets {offsets.tolist()} do not cut {len(markers)} states into "
                          f"the {len(trials)} trials of {layout}")

@@ -93,7 +93,8 @@ def load_gray(path: str | os.PathLike) -> np.ndarray:
     """Read an image file as 8-bit grayscale; a missing or unreadable file raises FileNotFoundError."""
     image = cv2.imread(os.fspath(path), cv2.IMREAD_GRAYSCALE)
     if image is None:
-        raise FileNotFoundError(f"cannot read image {path}: missing or not an image file")
+        raise FileNotFoundError(f"cannot read image {path}: missing or not an image file; restore it or "
+                                "remove it from the photo folder")
     return image
 
 
@@ -111,11 +112,22 @@ def _inside_circle(points: np.ndarray, centre, radius: float) -> np.ndarray:
     return np.linalg.norm(points - np.asarray(centre), axis=1) < radius
 
 
+def check_covers_circle(gray: np.ndarray, p: RatioDetector, where: str | os.PathLike = "image") -> None:
+    """A one-line error, instead of an OpenCV assertion, for an image that does not hold the sensor circle."""
+    (cx, cy), r = p.circle_centre_px, p.circle_radius_px
+    h, w = gray.shape[:2]
+    if not (0 <= cx < w and 0 <= cy < h):  # a circle cut by the frame edge is fine, one off it is not
+        raise ValueError(f"{where}: {w}x{h} px image does not hold the sensor circle (centre ({cx:g}, {cy:g}) px, "
+                         f"radius {r:g} px); use the camera's full frames or set detector.circle_centre_px/"
+                         "circle_radius_px for this camera")
+
+
 def ratio_components(gray: np.ndarray, p: RatioDetector) -> tuple[np.ndarray, np.ndarray]:
     """Dark components that pass the area and rescue filters: centroids (K, 2) px, strict (K,) mask.
 
     `strict` marks those that also pass the SPEC shape filters (aspect, fill).
     """
+    check_covers_circle(gray, p)
     # work on the circle's bounding box plus the blur radius: same result, ~3x fewer pixels
     cx, cy = p.circle_centre_px
     reach = p.circle_radius_px + p.background_px // 2 + 1

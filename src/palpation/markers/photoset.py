@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from palpation.markers.detect import BlobDetector, RatioDetector, detect_markers, load_gray
+from palpation.markers.detect import BlobDetector, RatioDetector, check_covers_circle, detect_markers, load_gray
 from palpation.markers.lattice import base_graph_order, median_spacing_px
 from palpation.markers.order import order_to_template
 from palpation.markers.template import require_full_set
@@ -50,6 +50,7 @@ def list_photos(directory: str | os.PathLike) -> list[Path]:
 def order_photo(path: Path, template: np.ndarray, params: RatioDetector) -> tuple[np.ndarray, int]:
     """127 markers of one photo in template order, and the raw candidate count before pruning."""
     gray = load_gray(path)
+    check_covers_circle(gray, params, path)
     raw = detect_markers(gray, RatioDetector(**{**params.__dict__, "prune": False}))
     points = require_full_set(detect_markers(gray, params, reference=template), path)
     ordered, found = order_to_template(points, template)

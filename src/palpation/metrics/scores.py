@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from palpation.io import save_npz
+from palpation.io import read_npz, save_npz
 from palpation.markers.lattice import N_MARKERS
 
 
@@ -31,18 +31,12 @@ def save_scores(path: str | Path, scores: Scores) -> None:
 
 def load_scores(path: str | Path) -> Scores:
     """One run's scores, checked: present, non-empty, one (sequence, frame) per 127 scores."""
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"scores {path} not found; run the train rule for this configuration first")
-    with np.load(path) as z:
-        missing = [k for k in ("probs", "labels") if k not in z]
-        if missing:
-            raise ValueError(f"{path}: missing {missing}; expected scores.npz from palpation.model.job")
-        if "sequence" not in z or "frame" not in z:
-            raise ValueError(f"{path}: no (sequence, frame) ids (written before scores carried them); rerun the "
-                             f"train rule (palpation.apps.train) for this run")
-        probs, labels = z["probs"].astype(np.float32).ravel(), z["labels"].astype(np.int8).ravel()
-        sequence, frame = z["sequence"].astype(np.int64).ravel(), z["frame"].astype(np.int64).ravel()
+    fix = "rerun the train rule (palpation.apps.train) for this run"
+    z = read_npz(path, ("probs", "labels"), fix)
+    if "sequence" not in z or "frame" not in z:
+        raise ValueError(f"{path}: no (sequence, frame) ids (written before scores carried them); {fix}")
+    probs, labels = z["probs"].astype(np.float32).ravel(), z["labels"].astype(np.int8).ravel()
+    sequence, frame = z["sequence"].astype(np.int64).ravel(), z["frame"].astype(np.int64).ravel()
     if probs.size == 0:
         raise ValueError(f"{path}: empty prediction set (0 scores); re-run the evaluation of this configuration")
     if probs.shape != labels.shape:

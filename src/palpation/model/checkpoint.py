@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from palpation.graph.normalise import NormStats
-from palpation.io import atomic_path
+from palpation.io import save_bytes
 from palpation.model.config import ModelConfig
 from palpation.model.stgnn import STGNN
 
@@ -33,8 +33,11 @@ def save_checkpoint(path: str | os.PathLike, model: STGNN, model_cfg: ModelConfi
         "rest_px": np.asarray(rest, np.float64).tolist(),
         "extra": extra or {},
     }
-    with atomic_path(path) as tmp:
-        torch.save(payload, tmp)
+    # through memory: given a path, torch.save names the zip's folder after the file, and the atomic
+    # write's temporary name would make every checkpoint differ; a buffer's folder is always "archive"
+    buf = io.BytesIO()
+    torch.save(payload, buf)
+    save_bytes(path, buf.getvalue())
 
 
 def checkpoint_bytes(model: STGNN) -> int:
@@ -49,9 +52,15 @@ def load_checkpoint(path: str | os.PathLike, device: str = "cpu") -> tuple[STGNN
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"checkpoint {path} not found; train a model first (palpation.apps.train)")
-    payload = torch.load(path, map_location=device, weights_only=False)
-    if payload.get("format") != FORMAT:
-        raise ValueError(f"{path} is not a palpation ST-GNN checkpoint (format {payload.get('format')!r})")
+    try:
+        payload = torch.load(path, map_location=device, weights_only=False)
+    except Exception as exc:  # torch raises RuntimeError, EOFError, UnpicklingError... for a damaged file
+        raise ValueError(f"checkpoint {path} is damaged or truncated ({type(exc).__name__}); retrain it "
+                         "(rerun its train rule)") from None
+    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
+        found = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
+        raise ValueError(f"{path} is not a palpation ST-GNN checkpoint (format {found!r}); retrain it "
+                         "(rerun its train rule)")
     model = STGNN(payload["clip_len"], ModelConfig(**payload["model_config"])).to(device)
     model.load_state_dict(payload["state_dict"])
     model.eval()

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
+
+from palpation.io import read_json
 
 SWEEP_COLUMNS = ("config", "seed", "auroc", "ap", "fg_iou", "bg_iou", "mcc", "f1", "precision", "recall", "chance")
 
@@ -23,7 +24,7 @@ def load_runs(root: str | Path, configs, clip_lens, seeds) -> list[dict]:
                 if not path.exists():
                     missing.append(str(path))
                     continue
-                m = json.loads(path.read_text())
+                m = read_json(path, "rerun the train rule for this run")
                 runs.append({"config": config, "clip_len": clip_len, "seed": seed, "dir": str(path.parent),
                              **m["test"], "train_seconds": m.get("train_seconds"), "device": m.get("device")})
     if missing:

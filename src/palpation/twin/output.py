@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from palpation.io import save_json, save_npz
+from palpation.io import read_npz, save_json, save_npz
 
 FORMAT = "palpation-sim/1"
 KEYS = ("markers", "labels", "centreline_px", "contact", "T_BA", "frame_index", "centreline_A",
@@ -75,24 +75,45 @@ def save_trajectory(path: str | os.PathLike, rec: TrajectoryRecord) -> Path:
 
 def load_trajectory(path: str | os.PathLike) -> dict:
     """Read a trajectory file back into a dict of arrays; `params` is decoded from JSON."""
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"trajectory file {path} does not exist; run the simulate stage first")
-    with np.load(path, allow_pickle=False) as z:
-        missing = [k for k in KEYS if k not in z.files]
-        if missing:
-            raise ValueError(f"{path}: not a {FORMAT} trajectory file, missing keys {missing}")
-        out = {k: z[k] for k in z.files}
+    out = read_npz(path, KEYS, f"not a complete {FORMAT} trajectory file: rerun the simulate stage")
     out["params"] = json.loads(str(out["params"]))
     out["kind"], out["format"], out["seed"] = str(out["kind"]), str(out["format"]), int(out["seed"])
     return out
 
 
+def previous_files(out_dir: Path, manifest: Path) -> list[Path]:
+    """Trajectory files of an earlier run in `out_dir`: those its manifest lists, and every npz of this
+    format (Snakemake deletes a rule's declared manifest before rerunning it, not the trajectories)."""
+    try:
+        listed = [out_dir / Path(e["file"]).name for e in json.loads(manifest.read_text()).get("files", [])]
+    except (OSError, ValueError, TypeError, KeyError, AttributeError):
+        listed = []
+    return sorted(set(listed) | {p for p in out_dir.glob("*.npz") if _is_trajectory(p)})
+
+
+def _is_trajectory(path: Path) -> bool:
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return "format" in z.files and str(z["format"]) == FORMAT
+    except Exception:  # unreadable (a truncated file of a killed writer): not ours to judge, left alone
+        return False
+
+
 def write_outputs(out_dir: str | os.PathLike, records: list[TrajectoryRecord],
                   failed: list[FailedRecord], meta: dict | None = None,
                   manifest_name: str = "manifest.json") -> Path:
-    """Write every trajectory file, then the manifest (last, so it only lists files that exist)."""
+    """Write every trajectory file, then the manifest (last, so it only lists files that exist).
+
+    A rerun into the same folder first removes the previous manifest and run's trajectories, so none
+    is left beside the new ones (and readers use only the manifest's files anyway)."""
     out_dir = Path(out_dir)
+    path = out_dir / manifest_name
+    new_names = {f"{rec.name}.npz" for rec in records}
+    old = previous_files(out_dir, path)
+    path.unlink(missing_ok=True)  # first: a run killed below leaves no manifest naming stale files
+    for stale in old:
+        if stale.name not in new_names:
+            stale.unlink(missing_ok=True)
     manifest = Manifest(meta={"format": FORMAT, **(meta or {})})
     for rec in records:
         save_trajectory(out_dir / f"{rec.name}.npz", rec)
@@ -101,6 +122,5 @@ def write_outputs(out_dir: str | os.PathLike, records: list[TrajectoryRecord],
                                "positive_rate": float(rec.labels.mean())})
     for bad in failed:
         manifest.failed.append(vars(bad).copy())
-    path = out_dir / manifest_name
     save_json(path, {"files": manifest.files, "failed": manifest.failed, **manifest.meta})
     return path

@@ -161,8 +161,10 @@ def plan_trajectories(specs: list[tuple], tip_B_m: np.ndarray | None = None,
     while active.any():
         if len(poses) >= MAX_FRAMES:
             i = int(np.flatnonzero(active)[0])
-            raise ValueError(f"{specs[i][0]}: waypoint {target[i]} not reached within {MAX_FRAMES} frames; "
-                             "check the waypoint table and controller limits")
+            raise ValueError(f"{specs[i][0]}: waypoint {target[i]} not reached within {MAX_FRAMES} frames of "
+                             f"{frame_dt_s:g} s; a frame time far above the reference {FRAME_DT_S:g} s makes the "
+                             "controller overshoot: lower twin.integrator.dt x twin.integrator.substeps "
+                             "(else check the waypoint table and controller limits)")
         row = base + target
         rotvec = (table_rot[row] * rotation.inv()).as_rotvec()
         angle = np.linalg.norm(rotvec, axis=1)
