@@ -127,6 +127,9 @@ def app_main(app: str) -> Callable:
         @functools.wraps(main)
         def checked(cfg: DictConfig):
             try:
+                from palpation.tracking import mark_work_start
+
+                mark_work_start()
                 check_config(cfg, app)
                 if cfg.get("track", cfg.get("tracking", False)):
                     from palpation.tracking import check_store

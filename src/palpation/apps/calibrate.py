@@ -95,7 +95,7 @@ def run(cfg: DictConfig) -> dict:
         from palpation.tracking import log_artifact, log_metrics, start_run
 
         tracked = start_run("calibrate", params=OmegaConf.to_container(cfg, resolve=True),
-                            run_name=study_key(cal, twin, mesh.resolution))
+                            config=study_key(cal, twin, mesh.resolution))
 
     def log_trial(trial, result):
         metrics = {"trial/value": result.value, "trial/diverged": float(result.diverged),
