@@ -152,8 +152,7 @@ def run(cfg: DictConfig) -> dict:
     save_csv(photo, out / "table4_maps_photo.csv")
     notes = _notes(c, layout, evidence)
     save_text(out / "table4_maps.md", table4_maps_markdown(table, c["profile"], notes, photo))
-    figures.fig7(panels, out / "fig7_confusion_maps", f"Vessel maps ({c['profile']} profile): TP green, FP blue, "
-                 "FN red, TN black")
+    figures.fig7(panels, out / "fig7_confusion_maps", f"Vessel maps ({c['profile']} profile)")
     figures.threshold_figure(curves, out / "fig7_threshold_selection")
     save_json(out / "vessel_maps.json", {"profile": c["profile"], "configs": summary,
                                          "silicone_layout": dataclasses.asdict(layout) if layout else None})
