@@ -113,3 +113,20 @@ def test_wrong_marker_count_is_refused(tmp_path, inputs):
     path.with_suffix(".json").write_text((tmp_path / "ok.json").read_text())
     with pytest.raises(ValueError, match="120 markers per state, expected 127"):
         app.run(config(inputs, tmp_path / "out", f"measured={path}", "mesh=/nonexistent/mesh.npz"))
+
+
+def test_starting_twin_is_honoured_or_refused(inputs, tmp_path):
+    """Issue 13.5: `twin.contact.phantom_contact=true twin.contact.k_s=2000` is the loop's start, not dropped."""
+    out = tmp_path / "start"
+    res = app.run(config(inputs, out, "loop.max_rounds=0", "twin.contact.phantom_contact=true",
+                         "twin.contact.k_s=2000", "loop.round0_params=[E]"))
+    rounds = json.loads((out / "rounds.json").read_text())
+    assert rounds["effects"] == ["surface_contact"] and rounds["rounds"][0]["params_after"]["k_s"] == 2000.0
+    assert "phantom_contact: true" in (out / "twin_fit" / "fitted.yaml").read_text()
+    assert res["effects"] == ["surface_contact"]
+    again = tmp_path / "again"  # the same start from the file the first run wrote
+    app.run(config(inputs, again, "loop.max_rounds=0", f"start={out / 'twin_fit' / 'fitted.yaml'}"))
+    assert json.loads((again / "rounds.json").read_text())["rounds"][0]["params_before"] is None
+    assert json.loads((again / "rounds.json").read_text())["effects"] == ["surface_contact"]
+    with pytest.raises(ValueError, match="twin.contact.mu=0.9 acts only with contact"):
+        app.run(config(inputs, tmp_path / "bad", "twin.contact.mu=0.9"))

@@ -66,11 +66,12 @@ def round_zero(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
 
 
 def run_loop(mset: MeasuredSet, source: str, cfg: LoopConfig, simulate, base: Mapping[str, float],
-             db_path: Path, tkey: str, on_round=None, progress: bool = False) -> Problem:
+             db_path: Path, tkey: str, on_round=None, progress: bool = False, effects_on=()) -> Problem:
     """Round 0, then up to cfg.max_rounds effects; returns the problem with its round records.
-    `progress`: tqdm bars over the rounds and each recalibration's trials."""
+    `base`/`effects_on`: the starting twin (loop.start.start_twin); `progress`: tqdm bars over the
+    rounds and each recalibration's trials."""
     cfg.validate()
-    p = make_problem(mset, source, cfg, base)
+    p = make_problem(mset, source, cfg, base, effects_on=effects_on)
     log.info("loop on %s: fit %s, held out %s, candidates %s", source, [t.name for t in p.targets if t.fit],
              [t.name for t in p.targets if not t.fit], p.candidates)
     round_zero([p], simulate, cfg, db_path, tkey, progress)
