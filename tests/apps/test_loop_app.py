@@ -54,6 +54,15 @@ def test_real_and_selftest_outputs(inputs, tmp_path):
     rows = list(csv.DictReader((out / "loop_real.csv").open()))
     assert tuple(rows[0]) == REAL_COLUMNS and rows[0]["round"] == "0" and rows[0]["effect_added"] == "none"
     assert json.loads((out / "rounds.json").read_text())["rounds"][0]["round"] == 0
+    head = (out / "report.md").read_text().split("## Rounds")[0]  # issue 13.6: the verdict comes first
+    for words in ("## Verdict", "Effects found", "search bound", "Remaining residual", "detector noise",
+                  "No accuracy target applies"):
+        assert words in head, words
+    tries = list(csv.DictReader((out / "tables" / "tries.csv").open()))  # tables as CSV, not Markdown
+    assert tries[0]["effects"] == "calibrated twin" and len(tries) == len(res["rows"]) + sum(
+        r["accepted"] == "False" for r in tries)
+    for name in ("attribution", "per_state", "modes", "uncertainty", "final_check"):
+        assert (out / "tables" / f"{name}.csv").exists(), name
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
         sim = compose(config_name="simulate",
                       overrides=[f"hydra.searchpath=[file://{out}]", "+twin_fit=fitted"])

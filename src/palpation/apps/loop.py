@@ -127,15 +127,20 @@ def run_real(cfg, loop: LoopConfig, tw, mset, source, sim, tkey, out: Path, reso
         fig_paths += figures.plot_rounds(rows, float(np.mean(list(baseline.values()))), out / "rounds")
         save_text(out / "loop_real.csv", report.csv_text(rows, report.REAL_COLUMNS))
         meta = {"source": source, "mesh": resolution, "n_trials": loop.search.n_trials,
-                "candidates": loop.effects, "final_markers": final, "bounds": loop.search.bounds}
+                "candidates": loop.effects, "final_markers": final, "bounds": loop.search.bounds,
+                "target_applies": Path(source).name == loop.target_set, "target_set": loop.target_set,
+                "target_mm": loop.target_mm,
+                "mean_px": float(np.mean([marker_mae_px(m, t.markers) for t, m in zip(p.targets, final)]))}
         save_text(out / "report.md", report.real_markdown(p, decs, baseline, meta))
+        for name, (rows_, columns) in report.real_tables(p, decs, baseline).items():  # the tables, as CSV
+            save_text(out / "tables" / f"{name}.csv", report.csv_text(rows_, columns))
         record = {"source": source, "mesh": resolution, "rounds": len(p.rounds) - 1,
                   "mae_px": {t.name: marker_mae_px(m, t.markers) for t, m in zip(p.targets, final)}}
         integ = {"dt": float(tw.integrator.dt), "substeps": int(tw.integrator.substeps)}
         option, readable = report.write_twin_fit(out, p, loop.shell_thickness_mm * 1e-3, record, integ)
         modes = {n: [(lab, d.row()) for lab, d in rows] for n, rows in decs.items()}
         save_json(out / "rounds.json", {"rounds": [_plain(r) for r in p.rounds], "effects": p.effects,
-                                        "params": p.params, "decompositions": modes})
+                                        "params": p.params, "decompositions": modes, "final_check": p.final})
         if cfg.track:
             from palpation.tracking import log_artifact
             for path in (out / "report.md", out / "loop_real.csv", option, readable, *fig_paths):

@@ -14,6 +14,7 @@ from palpation.loop.effects import EFFECTS
 from palpation.loop.engine import Problem, evaluate, initial_params, run_rounds
 from palpation.loop.inputs import load_targets, set_key
 from palpation.loop.recalibrate import recalibrate
+from palpation.loop.unexplained import check_all, noise_estimate
 from palpation.measured import MeasuredSet
 from palpation.twin.config import TwinConfig
 
@@ -78,4 +79,7 @@ def run_loop(mset: MeasuredSet, source: str, cfg: LoopConfig, simulate, base: Ma
     if on_round is not None:
         on_round(0, [p])
     run_rounds([p], simulate, cfg, db_path, tkey, cfg.max_rounds, on_round, progress)
+    sigma, where = noise_estimate(mset, cfg.noise_px)
+    check_all([p], simulate, cfg, {p.name: sigma})
+    p.final["noise_source"] = where
     return p
