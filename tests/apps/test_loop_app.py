@@ -40,7 +40,7 @@ def config(inputs, out, *extra):
             f"mesh={inputs / 'mesh.npz'}", f"measured={inputs / 'good'}", "track=false", f"out.dir={out}",
             "loop.max_frames=10", "loop.search.n_trials=2", "loop.search.n_startup=1", "loop.max_rounds=1",
             "loop.tries_per_round=1", "loop.effects=[surface_contact,camera]", "loop.holdout=[twist_x]",
-            "loop.selftest.effects=[camera]", "loop.selftest.runs_per_effect=1",
+            "loop.selftest.cases=[camera]", "loop.selftest.runs_per_case=1", "loop.selftest.max_rounds=1",
             "loop.selftest.states=[press,twist_x]", "loop.selftest.holdout=[twist_x]", *extra])
 
 
@@ -73,7 +73,7 @@ def test_real_and_selftest_outputs(inputs, tmp_path):
 
     res = app.run(config(inputs, out, "mode=selftest"))
     rows = list(csv.DictReader((out / "loop_selftest.csv").open()))
-    assert tuple(rows[0]) == SELFTEST_COLUMNS and rows[0]["effect_injected"] == "camera"
+    assert tuple(rows[0]) == SELFTEST_COLUMNS and rows[0]["effects_injected"] == "camera"
     assert (out / "selftest.md").exists() and (out / "selftest" / "sets" / "run_000.npz").exists()
 
 

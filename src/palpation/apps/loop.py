@@ -156,17 +156,18 @@ def run_self(cfg, loop: LoopConfig, tw, mset, source, sim, tkey, out: Path, star
         rows, _, _ = run_selftest(loop, sim.simulate, start, template, geometry, mset.rest,
                                   out / "selftest", out / "selftest" / "study.db", tkey,
                                   progress=bool(cfg.progress))
-        table = confusion(rows, st.effects)
+        table = confusion(rows, loop.effects)
         summ = summary(rows)
         save_text(out / "loop_selftest.csv", rows_csv(rows))
         meta = {"low": st.strength_low, "high": st.strength_high, "noise_px": st.noise_px, "states": st.states,
-                "holdout": st.holdout, "base_effects": st.base_effects}
+                "holdout": st.holdout, "base_effects": st.base_effects, "runs_per_case": st.runs_per_case,
+                "max_rounds": st.max_rounds, "ratio": loop.unexplained_ratio, "alpha": loop.unexplained_alpha}
         save_text(out / "selftest.md", report.selftest_markdown(rows, table, summ, meta))
         save_json(out / "selftest.json", {"rows": rows, "confusion": table, "summary": summ})
         for r in rows:
             _log({"mae_before_px": r["mae_before_px"], "mae_after_px": r["mae_after_px"],
-                  "named_correctly": float(r["effect_named"] == r["effect_injected"])}, r["run"], cfg.track)
-        _log({f"summary/{k}": float(v) for k, v in summ.items()}, None, cfg.track)
+                  "unexplained": float(r["unexplained"])}, r["run"], cfg.track)
+        _log({f"summary/{k}": float(v) for k, v in summ.items() if isinstance(v, (int, float))}, None, cfg.track)
         if cfg.track:
             from palpation.tracking import log_artifact
             for path in (out / "loop_selftest.csv", out / "selftest.md"):

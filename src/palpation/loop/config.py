@@ -30,15 +30,22 @@ class SearchSettings:
 
 @dataclass
 class SelftestConfig:
-    """Measured-like sets made by the twin with one hidden effect on, then the loop on each."""
+    """Measured-like sets made by the twin with hidden effects on, then the loop on each (loop.selftest).
 
-    effects: list[str] = field(default_factory=lambda: list(EFFECTS))
-    runs_per_effect: int = 3
+    Size = len(cases) x runs_per_case. A case is '+'-joined effects; `unlisted:<name>` is one outside the
+    candidate list (loop.selftest.UNLISTED)."""
+
+    cases: list[str] = field(default_factory=lambda: [
+        "surface_contact", "camera", "viscous", "layered", "marker_anchor",  # singles
+        "surface_contact+friction", "surface_contact+mount",  # dependent pairs
+        "surface_contact+camera", "camera+layered", "viscous+marker_anchor",  # independent pairs
+        "unlisted:image_distortion", "unlisted:marker_defect"])  # outside the list
+    runs_per_case: int = 1
     strength_low: float = 1.0  # injected strength in nominal steps, drawn uniformly in [low, high]
     strength_high: float = 2.5
     noise_px: float = 0.2  # std per coordinate (SPEC §13.2: photo noise < 0.2 px)
-    base_effects: list[str] = field(default_factory=lambda: ["surface_contact"])  # on in the starting twin
-    base_params: dict[str, float] = field(default_factory=lambda: {"E": 1.2225e6, "k_s": 2.0e3})
+    base_effects: list[str] = field(default_factory=list)  # on in the starting twin (none: as the real mode)
+    base_params: dict[str, float] = field(default_factory=lambda: {"E": 1.2225e6})
     states: list[str] = field(default_factory=lambda: ["press", "twist_z", "twist_x"])
     holdout: list[str] = field(default_factory=lambda: ["twist_z"])
     max_rounds: int = 1
@@ -81,7 +88,9 @@ class LoopConfig:
 
     def validate(self) -> "LoopConfig":
         check_effects(self.effects, "loop.effects")
-        check_effects(self.selftest.effects, "loop.selftest.effects")
+        from palpation.loop.selftest import parse_case
+        for case in self.selftest.cases:
+            parse_case(case, self.selftest.base_effects)
         check_effects(self.selftest.base_effects, "loop.selftest.base_effects")
         for where, names in (("loop.round0_params", self.round0_params), ("loop.recalibrate", self.recalibrate),
                              ("loop.steps", list(self.steps)), ("loop.selftest.base_params",
@@ -103,9 +112,10 @@ class LoopConfig:
         if not 0 < self.gate_fit_rel <= 1 or self.gate_z <= 0:
             raise ValueError(f"loop.gate_fit_rel={self.gate_fit_rel}, loop.gate_z={self.gate_z}: need "
                              "0 < gate_fit_rel <= 1 and gate_z > 0")
-        if self.max_rounds < 0 or self.selftest.max_rounds < 1 or self.selftest.runs_per_effect < 1:
-            raise ValueError("loop: need max_rounds >= 0, selftest.max_rounds >= 1 and "
-                             "selftest.runs_per_effect >= 1")
+        if self.max_rounds < 0 or self.selftest.max_rounds < 1 or self.selftest.runs_per_case < 1 \
+                or not self.selftest.cases:
+            raise ValueError("loop: need max_rounds >= 0, selftest.max_rounds >= 1, selftest.runs_per_case >= 1 "
+                             "and at least one selftest case")
         if not 0 < self.selftest.strength_low <= self.selftest.strength_high or self.selftest.noise_px < 0:
             st = self.selftest
             raise ValueError(f"loop.selftest: need 0 < strength_low <= strength_high and noise_px >= 0, got "
