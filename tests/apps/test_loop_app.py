@@ -56,7 +56,7 @@ def test_real_and_selftest_outputs(inputs, tmp_path):
     assert json.loads((out / "rounds.json").read_text())["rounds"][0]["round"] == 0
     head = (out / "report.md").read_text().split("## Rounds")[0]  # issue 13.6: the verdict comes first
     for words in ("## Verdict", "Effects found", "search bound", "Remaining residual", "detector noise",
-                  "No accuracy target applies"):
+                  "No accuracy target applies", "Compensation guard", "Uncertainty (Laplace"):
         assert words in head, words
     tries = list(csv.DictReader((out / "tables" / "tries.csv").open()))  # tables as CSV, not Markdown
     assert tries[0]["effects"] == "calibrated twin" and len(tries) == len(res["rows"]) + sum(

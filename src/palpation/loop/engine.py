@@ -58,6 +58,7 @@ class Problem:
     # the final check (loop.unexplained) reuses them when the twin did not change since
     last_signatures: dict | None = None
     final: dict | None = None  # loop.unexplained.final_check of the final twin
+    reference_attribution: dict | None = None  # real mode: attribution at the starting twin (loop.real)
 
     def fit_targets(self) -> list[Target]:
         return [t for t in self.targets if t.fit]

@@ -115,6 +115,13 @@ def verdict_lines(p: Problem, meta: Mapping) -> list[str]:
         trade = [f"{k} (ρ = {v:+.2f})" for k, v in unc["corr"].items() if abs(v) > 0.9]
         L.append(f"* Uncertainty (Laplace, 1 sd): {sd}" + (f"; trading pairs, poorly determined jointly: "
                                                             f"{', '.join(trade)}" if trade else "") + ".")
+    ref, first = p.reference_attribution, next((r for r in p.rounds if r["round"] == 1), None)
+    if ref is not None and first is not None:
+        same = set(ref["best_subset"]) == set(first["best_subset"])
+        L.append(f"* Compensation guard: the attribution on the starting twin's residual (before E was fitted) "
+                 f"keeps {'+'.join(ref['best_subset']) or 'nothing'} ({ref['best_subset_share']:.0%}), on the round-0 "
+                 f"twin {'+'.join(first['best_subset']) or 'nothing'} ({first['best_subset_share']:.0%})"
+                 + ("." if same else ": they differ, so the round-0 stiffness absorbed part of a signature."))
     t = f.get("test")
     if t:
         head = (f"* Remaining residual: RMS {t['rms_px']:.2f} px per coordinate on the fitted states against detector "
