@@ -36,6 +36,7 @@ rule loop:
         modes_png=report(f"{LOOP_DIR}/modes.png", caption="../report/loop_modes.rst", category="Residual loop"),
         modes_pdf=f"{LOOP_DIR}/modes.pdf",
         residuals=directory(f"{LOOP_DIR}/residuals"),
+        per_state=f"{LOOP_DIR}/tables/per_state.csv",  # report.md's tables as CSV (tables/*.csv)
     params:
         rule="loop",
         py=PY,
