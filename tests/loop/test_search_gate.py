@@ -19,7 +19,7 @@ def _sig(name, X, nonneg=True):
 
 
 def test_registry_dependencies():
-    assert EFFECTS["friction"].requires == ("surface_contact",) and EFFECTS["mount"].requires == ("surface_contact",)
+    assert EFFECTS["friction"].requires == ("surface_contact",) and EFFECTS["mount"].requires == ()
     assert EFFECTS["camera"].requires == ()
 
 

@@ -37,8 +37,8 @@ class SelftestConfig:
 
     cases: list[str] = field(default_factory=lambda: [
         "surface_contact", "camera", "viscous", "layered", "marker_anchor",  # singles
-        "surface_contact+friction", "surface_contact+mount",  # dependent pairs
-        "surface_contact+camera", "camera+layered", "viscous+marker_anchor",  # independent pairs
+        "surface_contact+friction",  # a dependent pair (friction acts only through contact)
+        "surface_contact+mount", "surface_contact+camera", "camera+layered", "viscous+marker_anchor",  # pairs
         "unlisted:image_distortion", "unlisted:marker_defect"])  # outside the list
     runs_per_case: int = 1
     strength_low: float = 1.0  # injected strength in nominal steps, drawn uniformly in [low, high]
