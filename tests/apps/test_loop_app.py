@@ -40,7 +40,7 @@ def config(inputs, out, *extra):
             f"mesh={inputs / 'mesh.npz'}", f"measured={inputs / 'good'}", "track=false", f"out.dir={out}",
             "loop.max_frames=10", "loop.search.n_trials=2", "loop.search.n_startup=1", "loop.max_rounds=1",
             "loop.tries_per_round=1", "loop.effects=[surface_contact,camera]", "loop.holdout=[twist_x]",
-            "loop.selftest.effects=[camera]", "loop.selftest.runs_per_effect=1",
+            "loop.selftest.cases=[camera]", "loop.selftest.runs_per_case=1", "loop.selftest.max_rounds=1",
             "loop.selftest.states=[press,twist_x]", "loop.selftest.holdout=[twist_x]", *extra])
 
 
@@ -54,6 +54,15 @@ def test_real_and_selftest_outputs(inputs, tmp_path):
     rows = list(csv.DictReader((out / "loop_real.csv").open()))
     assert tuple(rows[0]) == REAL_COLUMNS and rows[0]["round"] == "0" and rows[0]["effect_added"] == "none"
     assert json.loads((out / "rounds.json").read_text())["rounds"][0]["round"] == 0
+    head = (out / "report.md").read_text().split("## Rounds")[0]  # issue 13.6: the verdict comes first
+    for words in ("## Verdict", "Effects found", "search bound", "Remaining residual", "detector noise",
+                  "No accuracy target applies", "Compensation guard", "Uncertainty (Laplace"):
+        assert words in head, words
+    tries = list(csv.DictReader((out / "tables" / "tries.csv").open()))  # tables as CSV, not Markdown
+    assert tries[0]["effects"] == "calibrated twin" and len(tries) == len(res["rows"]) + sum(
+        r["accepted"] == "False" for r in tries)
+    for name in ("attribution", "per_state", "modes", "uncertainty", "final_check"):
+        assert (out / "tables" / f"{name}.csv").exists(), name
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
         sim = compose(config_name="simulate",
                       overrides=[f"hydra.searchpath=[file://{out}]", "+twin_fit=fitted"])
@@ -64,7 +73,7 @@ def test_real_and_selftest_outputs(inputs, tmp_path):
 
     res = app.run(config(inputs, out, "mode=selftest"))
     rows = list(csv.DictReader((out / "loop_selftest.csv").open()))
-    assert tuple(rows[0]) == SELFTEST_COLUMNS and rows[0]["effect_injected"] == "camera"
+    assert tuple(rows[0]) == SELFTEST_COLUMNS and rows[0]["effects_injected"] == "camera"
     assert (out / "selftest.md").exists() and (out / "selftest" / "sets" / "run_000.npz").exists()
 
 
@@ -113,3 +122,20 @@ def test_wrong_marker_count_is_refused(tmp_path, inputs):
     path.with_suffix(".json").write_text((tmp_path / "ok.json").read_text())
     with pytest.raises(ValueError, match="120 markers per state, expected 127"):
         app.run(config(inputs, tmp_path / "out", f"measured={path}", "mesh=/nonexistent/mesh.npz"))
+
+
+def test_starting_twin_is_honoured_or_refused(inputs, tmp_path):
+    """Issue 13.5: `twin.contact.phantom_contact=true twin.contact.k_s=2000` is the loop's start, not dropped."""
+    out = tmp_path / "start"
+    res = app.run(config(inputs, out, "loop.max_rounds=0", "twin.contact.phantom_contact=true",
+                         "twin.contact.k_s=2000", "loop.round0_params=[E]"))
+    rounds = json.loads((out / "rounds.json").read_text())
+    assert rounds["effects"] == ["surface_contact"] and rounds["rounds"][0]["params_after"]["k_s"] == 2000.0
+    assert "phantom_contact: true" in (out / "twin_fit" / "fitted.yaml").read_text()
+    assert res["effects"] == ["surface_contact"]
+    again = tmp_path / "again"  # the same start from the file the first run wrote
+    app.run(config(inputs, again, "loop.max_rounds=0", f"start={out / 'twin_fit' / 'fitted.yaml'}"))
+    assert json.loads((again / "rounds.json").read_text())["rounds"][0]["params_before"] is None
+    assert json.loads((again / "rounds.json").read_text())["effects"] == ["surface_contact"]
+    with pytest.raises(ValueError, match="twin.contact.mu=0.9 acts only with contact"):
+        app.run(config(inputs, tmp_path / "bad", "twin.contact.mu=0.9"))

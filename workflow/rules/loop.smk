@@ -36,6 +36,7 @@ rule loop:
         modes_png=report(f"{LOOP_DIR}/modes.png", caption="../report/loop_modes.rst", category="Residual loop"),
         modes_pdf=f"{LOOP_DIR}/modes.pdf",
         residuals=directory(f"{LOOP_DIR}/residuals"),
+        per_state=f"{LOOP_DIR}/tables/per_state.csv",  # report.md's tables as CSV (tables/*.csv)
     params:
         rule="loop",
         py=PY,
@@ -79,6 +80,36 @@ rule loop_selftest:
         gpu=GPU,
     log:
         "results/logs/loop/loop_selftest.log",
+    conda:
+        CONDA_ENV
+    shell:
+        LOOP_SHELL
+
+
+# The full self-test of issue 13 (>= 60 runs: 12 cases x 5, singles, dependent and independent pairs, two
+# out-of-list effects), beside the profile's own size; on a GPU with loop=paper it is one batch per twin call.
+rule loop_selftest_full:
+    input:
+        measured=rules.measured_photos.output.npz,
+        mesh=twin_mesh(),
+        conf=LOOP_CONF,
+    output:
+        csv=f"{LOOP_DIR}/full/loop_selftest.csv",
+        md=f"{LOOP_DIR}/full/selftest.md",
+        json=f"{LOOP_DIR}/full/selftest.json",
+    params:
+        rule="loop_selftest_full",
+        py=PY,
+        mode="selftest",
+        preset=config["loop"]["preset"],
+        twin=f"{LOOP_TWIN} loop.selftest.runs_per_case=5".strip(),
+        measured=lambda wildcards, input: input.measured[: -len(".npz")],
+        out=lambda wildcards, output: Path(output.csv).parent,
+        hydra=lambda wildcards, output: hydra_dir(output.csv),
+    resources:
+        gpu=GPU,
+    log:
+        "results/logs/loop/loop_selftest_full.log",
     conda:
         CONDA_ENV
     shell:

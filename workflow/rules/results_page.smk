@@ -10,7 +10,7 @@ rule results_page:
         data=plain(rules.data_summary.output.csv),
         calibration=plain(rules.calibrate.output.csv),
         loop=plain(rules.loop.output.csv),
-        loop_report=rules.loop.output.report,
+        loop_states=rules.loop.output.per_state,
         train_report=plain(rules.train_report.output),  # seed sweep, Table 4 upper half, Fig. 6 (+ Table 3 if ablated)
         maps=plain(rules.vessel_maps.output.table),
         maps_photo=rules.vessel_maps.output.photo,

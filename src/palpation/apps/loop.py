@@ -29,10 +29,11 @@ from palpation.figures import loop as figures
 from palpation.loop import report
 from palpation.loop.config import LoopConfig
 from palpation.loop.inputs import load_targets
-from palpation.loop.real import base_params, make_problem, run_loop, twin_key
+from palpation.loop.real import make_problem, run_loop, twin_key
 from palpation.loop.residual import decompose, image_direction_deg
 from palpation.loop.selftest import confusion, rows_csv, run_selftest, summary
 from palpation.loop.simulate import LoopSimulator, loop_twin_config
+from palpation.loop.start import nominal_projection, read_start, start_twin
 from palpation.markers.template import rest_template
 from palpation.measured import load_measured_set
 from palpation.twin.config import TwinConfig
@@ -58,33 +59,45 @@ def _log(metrics: dict, step: int | None = None, track: bool = True) -> None:
 def run(cfg: DictConfig) -> dict:
     if cfg.mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got '{cfg.mode}'")
-    twin: TwinConfig = OmegaConf.to_object(cfg.twin)
+    twin_node = cfg.twin
+    if cfg.get("start"):  # a starting twin file (e.g. an earlier loop's twin_fit/fitted.yaml) over cfg.twin
+        try:
+            twin_node = OmegaConf.merge(cfg.twin, read_start(cfg.start))
+        except Exception as exc:  # omegaconf: unknown key or wrong type in the file
+            if isinstance(exc, ValueError) and str(exc).startswith("loop start="):
+                raise
+            raise ValueError(f"loop start={cfg.start}: {str(exc).splitlines()[0]}; the file must hold twin "
+                             "sections and fields only (python -m palpation.apps.loop --cfg job lists them)") from None
+    twin: TwinConfig = OmegaConf.to_object(twin_node)
     loop: LoopConfig = OmegaConf.to_object(cfg.loop).validate()
+    # the starting twin: effects it already has and their values, honoured or refused (never dropped)
+    effects_on, start_params = start_twin(twin, loop.shell_thickness_mm * 1e-3)
     out = Path(cfg.out.dir)
     mset = load_measured_set(cfg.measured)
     source = str(cfg.measured)
     # every input check before the mesh is loaded or anything is simulated
     if cfg.mode == "real":
-        make_problem(mset, source, loop, {})
+        make_problem(mset, source, loop, start_params, effects_on=effects_on)
     else:
         load_targets(mset, source, loop.selftest.holdout, loop.selftest.states, loop.twist_z_angle)
     mesh = SensorMesh.load(cfg.mesh)
-    tw = loop_twin_config(twin, loop.shell_thickness_mm * 1e-3)
+    tw = loop_twin_config(nominal_projection(twin), loop.shell_thickness_mm * 1e-3)
     sim = LoopSimulator(mesh, tw, rest_template(), device=twin.device, split_by_kind=loop.split(twin.device),
                         max_frames=loop.max_frames)
     tkey = twin_key(tw, mesh.resolution)
     start = time.perf_counter()
     if cfg.mode == "real":
-        result = run_real(cfg, loop, tw, mset, source, sim, tkey, out, mesh.resolution)
+        result = run_real(cfg, loop, tw, mset, source, sim, tkey, out, mesh.resolution, start_params, effects_on)
     else:
-        result = run_self(cfg, loop, tw, mset, source, sim, tkey, out)
+        result = run_self(cfg, loop, tw, mset, source, sim, tkey, out, start_params)
     result.update({"wall_s": time.perf_counter() - start, "envs_simulated": sim.envs_simulated})
     log.info("loop %s done in %.0f s (%d distinct envs simulated)", cfg.mode, result["wall_s"],
              sim.envs_simulated)
     return result
 
 
-def run_real(cfg, loop: LoopConfig, tw, mset, source, sim, tkey, out: Path, resolution: str) -> dict:
+def run_real(cfg, loop: LoopConfig, tw, mset, source, sim, tkey, out: Path, resolution: str, start: dict,
+             effects_on: list[str]) -> dict:
     with _tracked(cfg, "real"):
         def on_round(k, problems):
             p = problems[0]  # the twin kept after round k (a rejected try is restored)
@@ -94,8 +107,8 @@ def run_real(cfg, loop: LoopConfig, tw, mset, source, sim, tkey, out: Path, reso
                   "share_explained": kept[0]["share_explained"] if kept else 0.0,
                   "tries": float(sum(r["round"] == k for r in p.rounds))}, k, cfg.track)
 
-        p = run_loop(mset, source, loop, sim.simulate, base_params(tw), out / "study.db", tkey, on_round,
-                     progress=bool(cfg.progress))
+        p = run_loop(mset, source, loop, sim.simulate, start, out / "study.db", tkey, on_round,
+                     progress=bool(cfg.progress), effects_on=effects_on)
         final = p.markers
         template = rest_template()
         baseline = {t.name: marker_mae_px(template, t.markers) for t in p.targets}
@@ -114,15 +127,20 @@ def run_real(cfg, loop: LoopConfig, tw, mset, source, sim, tkey, out: Path, reso
         fig_paths += figures.plot_rounds(rows, float(np.mean(list(baseline.values()))), out / "rounds")
         save_text(out / "loop_real.csv", report.csv_text(rows, report.REAL_COLUMNS))
         meta = {"source": source, "mesh": resolution, "n_trials": loop.search.n_trials,
-                "candidates": loop.effects, "final_markers": final, "bounds": loop.search.bounds}
+                "candidates": loop.effects, "final_markers": final, "bounds": loop.search.bounds,
+                "target_applies": Path(source).name == loop.target_set, "target_set": loop.target_set,
+                "target_mm": loop.target_mm,
+                "mean_px": float(np.mean([marker_mae_px(m, t.markers) for t, m in zip(p.targets, final)]))}
         save_text(out / "report.md", report.real_markdown(p, decs, baseline, meta))
+        for name, (rows_, columns) in report.real_tables(p, decs, baseline).items():  # the tables, as CSV
+            save_text(out / "tables" / f"{name}.csv", report.csv_text(rows_, columns))
         record = {"source": source, "mesh": resolution, "rounds": len(p.rounds) - 1,
                   "mae_px": {t.name: marker_mae_px(m, t.markers) for t, m in zip(p.targets, final)}}
         integ = {"dt": float(tw.integrator.dt), "substeps": int(tw.integrator.substeps)}
         option, readable = report.write_twin_fit(out, p, loop.shell_thickness_mm * 1e-3, record, integ)
         modes = {n: [(lab, d.row()) for lab, d in rows] for n, rows in decs.items()}
         save_json(out / "rounds.json", {"rounds": [_plain(r) for r in p.rounds], "effects": p.effects,
-                                        "params": p.params, "decompositions": modes})
+                                        "params": p.params, "decompositions": modes, "final_check": p.final})
         if cfg.track:
             from palpation.tracking import log_artifact
             for path in (out / "report.md", out / "loop_real.csv", option, readable, *fig_paths):
@@ -130,25 +148,26 @@ def run_real(cfg, loop: LoopConfig, tw, mset, source, sim, tkey, out: Path, reso
     return {"effects": p.effects, "rows": rows, "params": p.params, "fitted_option": str(option)}
 
 
-def run_self(cfg, loop: LoopConfig, tw, mset, source, sim, tkey, out: Path) -> dict:
+def run_self(cfg, loop: LoopConfig, tw, mset, source, sim, tkey, out: Path, start: dict) -> dict:
     st = loop.selftest
     template = load_targets(mset, source, [], st.states, loop.twist_z_angle)
     geometry = {s.name: s for s in mset.states}
     with _tracked(cfg, "selftest"):
-        rows, _, _ = run_selftest(loop, sim.simulate, base_params(tw), template, geometry, mset.rest,
+        rows, _, _ = run_selftest(loop, sim.simulate, start, template, geometry, mset.rest,
                                   out / "selftest", out / "selftest" / "study.db", tkey,
                                   progress=bool(cfg.progress))
-        table = confusion(rows, st.effects)
+        table = confusion(rows, loop.effects)
         summ = summary(rows)
         save_text(out / "loop_selftest.csv", rows_csv(rows))
         meta = {"low": st.strength_low, "high": st.strength_high, "noise_px": st.noise_px, "states": st.states,
-                "holdout": st.holdout, "base_effects": st.base_effects}
+                "holdout": st.holdout, "base_effects": st.base_effects, "runs_per_case": st.runs_per_case,
+                "max_rounds": st.max_rounds, "ratio": loop.unexplained_ratio, "alpha": loop.unexplained_alpha}
         save_text(out / "selftest.md", report.selftest_markdown(rows, table, summ, meta))
         save_json(out / "selftest.json", {"rows": rows, "confusion": table, "summary": summ})
         for r in rows:
             _log({"mae_before_px": r["mae_before_px"], "mae_after_px": r["mae_after_px"],
-                  "named_correctly": float(r["effect_named"] == r["effect_injected"])}, r["run"], cfg.track)
-        _log({f"summary/{k}": float(v) for k, v in summ.items()}, None, cfg.track)
+                  "unexplained": float(r["unexplained"])}, r["run"], cfg.track)
+        _log({f"summary/{k}": float(v) for k, v in summ.items() if isinstance(v, (int, float))}, None, cfg.track)
         if cfg.track:
             from palpation.tracking import log_artifact
             for path in (out / "loop_selftest.csv", out / "selftest.md"):

@@ -95,3 +95,33 @@ def attribute(residual: np.ndarray, signatures: list[Signature], max_subset: int
     named = next((r["effect"] for r in ranking if r["effect"] in best), None)
     return Attribution(named=named, ranking=ranking, best_subset=best,
                        best_subset_share=1.0 - best_rss / rss0 if rss0 > 0 else 0.0, n_obs=n, betas=betas)
+
+
+def joint_candidates(residual: np.ndarray, signatures: list[Signature], conditional: dict[str, Signature],
+                     requires: dict[str, tuple[str, ...]], pool: list[str], min_rms_px: float = 0.02) -> list[dict]:
+    """Effect pairs to try jointly when single effects fail, best (lowest BIC) first.
+
+    * dependent pairs: an effect that acts only through another (friction, mount need surface contact) is
+      fitted with its `conditional` columns (its signature at the twin with the provider's nominal step on)
+      next to the provider's own columns: alone its signature is dead;
+    * independent pairs: any two live effects of `pool` (the BIC-best subset and the top of the ranking).
+    A pair is kept only if its BIC beats no change and each of its members alone: two effects that only
+    show together, or two that each explain part of the residual."""
+    y = -np.asarray(residual, np.float64).reshape(-1)
+    n = len(y)
+    by = {s.effect: s for s in signatures}
+    alone = {e: bic(fit_subset(y, [s], min_rms_px)[1], n, s.columns.shape[1]) for e, s in by.items()}
+    plans = []
+    for e, s in conditional.items():
+        if all(r in by for r in requires.get(e, ())):
+            plans.append(((*requires[e], e), [*(by[r] for r in requires[e]), s]))
+    live = [e for e in dict.fromkeys(pool) if e in by and not requires.get(e)]
+    plans += [((a, b), [by[a], by[b]]) for a, b in combinations(live, 2)]
+    out, base = [], bic(float(y @ y), n, 0)
+    for effects, sigs in plans:
+        _, rss = fit_subset(y, sigs, min_rms_px)
+        value = bic(rss, n, sum(s.columns.shape[1] for s in sigs))
+        if value < base and all(value < alone.get(e, base) for e in effects):
+            out.append({"effects": tuple(effects), "bic": value, "share": 1.0 - rss / float(y @ y) if y @ y > 0
+                        else 0.0, "sigs": sigs})
+    return sorted(out, key=lambda d: d["bic"])

@@ -26,7 +26,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from palpation.twin.config import TwinConfig
-from palpation.twin.parameters import EFFECT_TITLES, PARAMETERS, TwinParameter, by_env_key
+from palpation.twin.parameters import EFFECT_REQUIRES, EFFECT_TITLES, PARAMETERS, TwinParameter, by_env_key
 
 
 @dataclass(frozen=True)
@@ -61,6 +61,7 @@ class Effect:
     title: str
     params: tuple[str, ...]
     dofs: tuple[Dof, ...]
+    requires: tuple[str, ...] = ()  # effects it acts through (twin.parameters.EFFECT_REQUIRES)
 
 
 def _effect(name: str, title: str) -> Effect:
@@ -73,13 +74,28 @@ def _effect(name: str, title: str) -> Effect:
         dofs.setdefault(p.loop.dof, []).append(p)
     return Effect(name, title, tuple(p.name for p in entries),
                   tuple(Dof(d, tuple((p.name, p.loop.mode, p.loop.amount) for p in ps), ps[0].loop.nonneg)
-                        for d, ps in dofs.items()))
+                        for d, ps in dofs.items()), tuple(EFFECT_REQUIRES.get(name, ())))
 
 
 _stray = {p.loop.effect for p in PARAMETERS.values() if p.loop is not None} - set(EFFECT_TITLES)
 if _stray:
     raise ValueError(f"twin.parameters: LoopStep effect(s) {sorted(_stray)} missing from EFFECT_TITLES")
 EFFECTS: dict[str, Effect] = {name: _effect(name, title) for name, title in EFFECT_TITLES.items()}
+
+
+def _check_requires() -> None:
+    """EFFECT_REQUIRES must match the registry: an effect whose parameters need contact requires the effect
+    that switches contact on (a parameter needing the phantom with an 'off' value), and nothing else."""
+    providers = {p.loop.effect for p in PARAMETERS.values() if p.loop and p.needs == "phantom" and p.off is not None}
+    for name, eff in EFFECTS.items():
+        needs = {PARAMETERS[n].needs for n in eff.params}
+        want = set() if name in providers or not needs & {"contact", "phantom"} else providers
+        if set(eff.requires) != want:
+            raise ValueError(f"twin.parameters.EFFECT_REQUIRES['{name}'] = {sorted(eff.requires)}, but its "
+                             f"parameters need {sorted(needs)}: it should be {sorted(want)}")
+
+
+_check_requires()
 
 # the loop's parameters: E (searched every round, loop.recalibrate) and every effect's, in registry order
 LOOP_PARAMS = {"E", *(n for e in EFFECTS.values() for n in e.params)}

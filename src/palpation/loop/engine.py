@@ -20,9 +20,10 @@ from typing import Mapping
 import numpy as np
 
 from palpation.calibration.objective import marker_mae_px
-from palpation.loop.attribution import Signature, attribute, fit_subset
+from palpation.loop.attribution import Signature, attribute, fit_subset, joint_candidates
 from palpation.loop.config import LoopConfig
 from palpation.loop.effects import EFFECTS, PARAMS, Dof, bounds, clip, move
+from palpation.loop.gate import decide, heldout_z
 from palpation.loop.inputs import Target
 from palpation.loop.recalibrate import recalibrate
 from palpation.progress import bar
@@ -35,6 +36,7 @@ log = logging.getLogger(__name__)
 WARM_FRACTIONS = (0.25, 0.5, 1.0)
 JOINT_FRACTIONS = (0.5, 1.0)
 REFIT = "_refit"  # signature of the parameters the twin already has
+COND = "_cond:"  # prefix: a dependent effect's columns at the twin with its provider on
 MIN_RMS_PX = 0.02  # a signature column below this RMS change is dead (attribution.fit_subset)
 
 
@@ -52,6 +54,11 @@ class Problem:
     trust: dict[str, tuple[float, float]] = field(default_factory=dict)  # per-round search bounds
     refit: list = field(default_factory=list)  # refit_dofs at this round's signatures
     done: bool = False
+    # the signatures of the last round (candidates, refit, conditional) and the params they were made at:
+    # the final check (loop.unexplained) reuses them when the twin did not change since
+    last_signatures: dict | None = None
+    final: dict | None = None  # loop.unexplained.final_check of the final twin
+    reference_attribution: dict | None = None  # real mode: attribution at the starting twin (loop.real)
 
     def fit_targets(self) -> list[Target]:
         return [t for t in self.targets if t.fit]
@@ -104,51 +111,74 @@ def refit_dofs(p: Problem) -> list[Dof]:
 
 
 def signatures(problems: list[Problem], simulate, steps: Mapping[str, float]
-               ) -> tuple[dict[str, list[Signature]], dict[str, Signature]]:
-    """Per problem, each candidate's dof columns at the fitted states, and the columns of the parameters
-    it already has (REFIT, for the warm start): one batch over all problems."""
-    jobs, index = [], []
+               ) -> tuple[dict[str, list[Signature]], dict[str, Signature], dict[str, dict[str, Signature]]]:
+    """Per problem, each candidate's dof columns at the fitted states, the columns of the parameters it
+    already has (REFIT, for the warm start) and, for a candidate that acts only through another candidate
+    (EFFECTS[e].requires, e.g. friction through surface contact), its conditional columns at the twin with
+    the provider's nominal step on (its own are dead there): one batch over all problems."""
+    jobs, index, bases = [], [], {}
     for p in problems:
         fit = p.fit_targets()
-        groups = [(e, EFFECTS[e].dofs) for e in p.candidates] + [(REFIT, p.refit)]
-        for e, dofs in groups:
+        groups = [(e, EFFECTS[e].dofs, None) for e in p.candidates] + [(REFIT, p.refit, None)]
+        for e in p.candidates:
+            req = EFFECTS[e].requires
+            if req and all(r in p.candidates for r in req):
+                base = dict(p.params)
+                for r in req:
+                    for d in EFFECTS[r].dofs:
+                        base = move(base, d, 1.0, steps)
+                bases[(p.name, e)] = len(jobs)
+                jobs += [(t.state, base) for t in fit]
+                groups.append((COND + e, EFFECTS[e].dofs, base))
+        for e, dofs, base in groups:
             for dof in dofs:
                 index.append((p, e, dof, len(jobs)))
-                jobs += [(t.state, move(p.params, dof, 1.0, steps)) for t in fit]
+                jobs += [(t.state, move(p.params if base is None else base, dof, 1.0, steps)) for t in fit]
     markers, failed = simulate(jobs)
     out: dict[str, list[Signature]] = {p.name: [] for p in problems}
+    cond: dict[str, dict[str, Signature]] = {p.name: {} for p in problems}
     cols: dict[tuple, list] = {}
     for p, e, dof, start in index:
         fit_ix = [i for i, t in enumerate(p.targets) if t.fit]
+        ref = p.markers[fit_ix]
+        if e.startswith(COND):
+            b = bases[(p.name, e[len(COND):])]
+            ref = p.markers[fit_ix] if failed[b:b + len(fit_ix)].any() else markers[b:b + len(fit_ix)]
         block = markers[start:start + len(fit_ix)]
         if failed[start:start + len(fit_ix)].any():
             log.warning("loop '%s': %s.%s diverged at its nominal step; its column is left out", p.name, e,
                         dof.name)
-            block = p.markers[fit_ix]
-        cols.setdefault((p.name, e), []).append(((block - p.markers[fit_ix]).reshape(-1), dof))
+            block = ref
+        cols.setdefault((p.name, e), []).append(((block - ref).reshape(-1), dof))
     refit = {}
     for p in problems:
-        for e in [*p.candidates, REFIT]:
+        n = sum(t.fit for t in p.targets) * len(p.targets[0].markers) * 2
+        for e in [*p.candidates, REFIT, *(COND + c for c in p.candidates)]:
+            if e.startswith(COND) and (p.name, e) not in cols:
+                continue
             c = cols.get((p.name, e), [])
-            n = sum(t.fit for t in p.targets) * len(p.targets[0].markers) * 2
             X = np.stack([x for x, _ in c], axis=1) if c else np.zeros((n, 0))
-            sig = Signature(e, [d.name for _, d in c], X, [d.nonneg for _, d in c])
+            name = e[len(COND):] if e.startswith(COND) else e
+            sig = Signature(name, [d.name for _, d in c], X, [d.nonneg for _, d in c])
             if e == REFIT:
                 refit[p.name] = sig
+            elif e.startswith(COND):
+                cond[p.name][name] = sig
             else:
                 out[p.name].append(sig)
-    return out, refit
+    return out, refit, cond
 
 
-def linear_estimate(p: Problem, effect: str, residual: np.ndarray, sig: Signature, refit: Signature,
-                    steps: Mapping[str, float], limits: Mapping | None = None) -> list[dict]:
-    """Warm starts: the least-squares step of the new effect's dofs alone (WARM_FRACTIONS of it) and
-    jointly with the current parameters' (p.refit, as at signature time; JOINT_FRACTIONS), clipped."""
+def linear_estimate(p: Problem, combo: tuple[str, ...], residual: np.ndarray, sigs: list[Signature],
+                    refit: Signature, steps: Mapping[str, float], limits: Mapping | None = None) -> list[dict]:
+    """Warm starts: the least-squares step of the new effects' dofs alone (WARM_FRACTIONS of it) and
+    jointly with the current parameters' (p.refit, as at signature time; JOINT_FRACTIONS), clipped.
+    `sigs`: the combo's columns in order (a dependent effect's conditional ones after its provider's)."""
     y = -np.asarray(residual).reshape(-1)
-    alone, _ = fit_subset(y, [sig], MIN_RMS_PX)
-    joint, _ = fit_subset(y, [refit, sig], MIN_RMS_PX)
-    plans = [(EFFECTS[effect].dofs, alone, WARM_FRACTIONS), ([*p.refit, *EFFECTS[effect].dofs], joint,
-                                                              JOINT_FRACTIONS)]
+    alone, _ = fit_subset(y, sigs, MIN_RMS_PX)
+    joint, _ = fit_subset(y, [refit, *sigs], MIN_RMS_PX)
+    new = [d for e in combo for d in EFFECTS[e].dofs]
+    plans = [(new, alone, WARM_FRACTIONS), ([*p.refit, *new], joint, JOINT_FRACTIONS)]
     out = []
     for dofs, beta, fractions in plans:
         for f in fractions:
@@ -171,12 +201,30 @@ def trust_region(p: Problem, names, factor: float, overrides: Mapping | None = N
     return out
 
 
+def round_plan(p: Problem, att, sigs: list[Signature], cond: dict[str, Signature], residual: np.ndarray,
+               cfg: LoopConfig) -> list[dict]:
+    """What to try this round, in order: single effects of the BIC-best subset by rank
+    (cfg.tries_per_round), then pairs tried jointly (cfg.pair_tries): dependent pairs and pairs of the
+    BIC-best subset / top of the ranking (attribution.joint_candidates). Pairs are tried only after every
+    single try failed the gate."""
+    by = {s.effect: s for s in sigs}
+    singles = [r["effect"] for r in att.ranking if r["effect"] in att.best_subset][:cfg.tries_per_round]
+    plan = [{"effects": (e,), "sigs": [by[e]], "share": att.share_of(e)} for e in singles]
+    if cfg.pair_tries > 0:
+        pool = [*att.best_subset, *[r["effect"] for r in att.ranking[:3]]]
+        requires = {e: EFFECTS[e].requires for e in p.candidates}
+        pairs = joint_candidates(residual, sigs, cond, requires, pool, MIN_RMS_PX)
+        plan += [{"effects": d["effects"], "sigs": d["sigs"], "share": d["share"], "pair": True}
+                 for d in pairs[:cfg.pair_tries]]
+    return plan
+
+
 def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path, twin_key: str,
                max_rounds: int, on_round=None, progress: bool = False) -> None:
     """Advance every problem until its loop stops; each attempt's record lands in problem.rounds.
 
-    Within a round, the effects the BIC keeps are tried in ranking order (at most cfg.tries_per_round):
-    the first whose recalibrated twin lowers the held-out MAE is kept; if none does, the loop stops.
+    Within a round the plan (round_plan) is tried in order: the first effect set whose recalibrated twin
+    passes the gate (loop.gate) is kept; if none does, the loop stops.
     `progress`: a tqdm bar over the rounds, and one per recalibration over its trials.
     """
     steps = dict(cfg.steps)
@@ -188,32 +236,32 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
         evaluate([p for p in active if p.markers is None], simulate)  # else still current from last round
         for p in active:
             p.refit = refit_dofs(p)
-        sigs, refits = signatures(active, simulate, steps)
+        sigs, refits, conds = signatures(active, simulate, steps)
         before, queue = {}, {}
         for p in active:
+            p.last_signatures = {"params": dict(p.params), "sigs": sigs[p.name], "refit": refits[p.name],
+                                 "cond": conds[p.name], "refit_dofs": list(p.refit)}
             fit_ix = [i for i, t in enumerate(p.targets) if t.fit]
             residual = np.stack([p.markers[i] - p.targets[i].markers for i in fit_ix])
             att = attribute(residual, sigs[p.name], min_rms_px=MIN_RMS_PX)
             before[p.name] = (p.summary(), dict(p.params), p.markers.copy(), att, list(p.searched), residual)
-            kept = [r["effect"] for r in att.ranking if r["effect"] in att.best_subset]
-            queue[p.name] = kept[:cfg.tries_per_round]
+            queue[p.name] = round_plan(p, att, sigs[p.name], conds[p.name], residual, cfg)
             if not queue[p.name]:
                 p.done = True
                 p.rounds.append(_record(k, p, None, att, before[p.name], None, accepted=False))
                 log.info("loop '%s' round %d: no effect explains the residual (BIC); stop", p.name, k)
-        for attempt in range(cfg.tries_per_round):
+        for attempt in range(max((len(q) for q in queue.values()), default=0)):
             trying = [p for p in active if not p.done and len(queue[p.name]) > attempt]
             if not trying:
                 break
             warm = {}
             for p in trying:
-                effect, att = queue[p.name][attempt], before[p.name][3]
+                item, att = queue[p.name][attempt], before[p.name][3]
                 old = before[p.name][4]
-                p.searched = old + [n for n in EFFECTS[effect].params if n not in old]
+                p.searched = old + [n for e in item["effects"] for n in EFFECTS[e].params if n not in old]
                 p.trust = trust_region(p, old, cfg.search.trust_factor, cfg.search.bounds)
-                sig = next(x for x in sigs[p.name] if x.effect == effect)
-                estimates = linear_estimate(p, effect, before[p.name][5], sig, refits[p.name], steps,
-                                            cfg.search.bounds)
+                estimates = linear_estimate(p, item["effects"], before[p.name][5], item["sigs"], refits[p.name],
+                                            steps, cfg.search.bounds)
                 warm[p.name] = [dict(before[p.name][1]), *estimates]
             fits = recalibrate(trying, simulate, cfg.search, db_path, f"r{k}t{attempt}", twin_key, warm,
                                progress=progress)
@@ -221,21 +269,24 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                 p.params.update(fits[p.name]["params"])
             evaluate(trying, simulate)
             for p in trying:
-                effect, (b, b_params, b_markers, att, b_searched, _) = queue[p.name][attempt], before[p.name]
+                item, (b, b_params, b_markers, att, b_searched, _) = queue[p.name][attempt], before[p.name]
                 a = p.summary()
-                metric = "heldout" if np.isfinite(a["heldout"]) else "fit"
-                ok = a[metric] < b[metric] - min(cfg.min_improvement_px, cfg.min_improvement_rel * b[metric])
-                after = {**a, "fit_result": fits[p.name]}
-                p.rounds.append(_record(k, p, effect, att, before[p.name], after, ok))
-                log.info("loop '%s' round %d try %d: %s explains %.1f %% of the residual; MAE fit %.2f -> "
-                         "%.2f, held-out %.2f -> %.2f px: %s", p.name, k, attempt + 1, effect,
-                         100 * att.share_of(effect), b["fit"], a["fit"], b["heldout"], a["heldout"],
-                         "kept" if ok else "rejected")
+                held = [i for i, t in enumerate(p.targets) if not t.fit]
+                evidence = heldout_z([p.targets[i].markers for i in held], [b_markers[i] for i in held],
+                                     [p.markers[i] for i in held])
+                ok, why = decide(b, a, evidence, cfg.min_improvement_px, cfg.min_improvement_rel, cfg.gate_fit_rel,
+                                 cfg.gate_z)
+                after = {**a, "fit_result": fits[p.name], "gate": {**evidence, "why": why}}
+                p.rounds.append(_record(k, p, item, att, before[p.name], after, ok))
+                log.info("loop '%s' round %d try %d: %s explains %.1f %% of the residual; MAE fit %.2f -> %.2f "
+                         "px; %s: %s", p.name, k, attempt + 1, "+".join(item["effects"]), 100 * item["share"],
+                         b["fit"], a["fit"], why, "kept" if ok else "rejected")
                 if ok:
-                    p.effects.append(effect)
-                    p.candidates.remove(effect)
+                    for e in item["effects"]:
+                        p.effects.append(e)
+                        p.candidates.remove(e)
                     queue[p.name] = []  # this round is done
-                else:  # the held-out error did not fall: restore the previous twin
+                else:  # the gate refused: restore the previous twin
                     p.params, p.markers, p.searched = dict(b_params), b_markers, list(b_searched)
         for p in active:
             if not p.done and not any(r["round"] == k and r["accepted"] for r in p.rounds):
@@ -246,10 +297,11 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
     rounds.close()
 
 
-def _record(k: int, p: Problem, effect, att, before, after, accepted: bool) -> dict:
+def _record(k: int, p: Problem, item, att, before, after, accepted: bool) -> dict:
     b_summary, b_params, b_markers = before[:3]
-    share = att.share_of(effect) if effect else 0.0
-    return {"round": k, "effect": effect, "accepted": accepted, "share_explained": share,
+    effects = list(item["effects"]) if item else []
+    return {"round": k, "effect": "+".join(effects) or None, "effects": effects, "accepted": accepted,
+            "share_explained": item["share"] if item else 0.0,
             "ranking": att.ranking, "best_subset": att.best_subset, "best_subset_share": att.best_subset_share,
             "before": b_summary, "params_before": b_params, "markers_before": b_markers, "after": after,
             "params_after": dict(p.params) if after else None,

@@ -9,11 +9,15 @@ import logging
 from pathlib import Path
 from typing import Mapping
 
+import numpy as np
+
+from palpation.loop.attribution import attribute
 from palpation.loop.config import LoopConfig
 from palpation.loop.effects import EFFECTS
-from palpation.loop.engine import Problem, evaluate, initial_params, run_rounds
+from palpation.loop.engine import MIN_RMS_PX, Problem, evaluate, initial_params, refit_dofs, run_rounds, signatures
 from palpation.loop.inputs import load_targets, set_key
 from palpation.loop.recalibrate import recalibrate
+from palpation.loop.unexplained import check_all, noise_estimate
 from palpation.measured import MeasuredSet
 from palpation.twin.config import TwinConfig
 
@@ -65,16 +69,34 @@ def round_zero(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                          "markers_after": p.markers.copy()})
 
 
+def reference_attribution(p: Problem, simulate, cfg: LoopConfig) -> dict:
+    """Compensation guard: the attribution on the starting (reference-parameter) twin's residual, before
+    round 0 recalibrates E, so an effect whose signature the stiffness absorbs there still shows."""
+    evaluate([p], simulate)
+    p.refit = refit_dofs(p)
+    sigs, _, _ = signatures([p], simulate, dict(cfg.steps))
+    fit_ix = [i for i, t in enumerate(p.targets) if t.fit]
+    att = attribute(np.stack([p.markers[i] - p.targets[i].markers for i in fit_ix]), sigs[p.name],
+                    min_rms_px=MIN_RMS_PX)
+    p.markers = None  # round 0 evaluates its own twin
+    return {"ranking": att.ranking, "best_subset": att.best_subset, "best_subset_share": att.best_subset_share}
+
+
 def run_loop(mset: MeasuredSet, source: str, cfg: LoopConfig, simulate, base: Mapping[str, float],
-             db_path: Path, tkey: str, on_round=None, progress: bool = False) -> Problem:
+             db_path: Path, tkey: str, on_round=None, progress: bool = False, effects_on=()) -> Problem:
     """Round 0, then up to cfg.max_rounds effects; returns the problem with its round records.
-    `progress`: tqdm bars over the rounds and each recalibration's trials."""
+    `base`/`effects_on`: the starting twin (loop.start.start_twin); `progress`: tqdm bars over the
+    rounds and each recalibration's trials."""
     cfg.validate()
-    p = make_problem(mset, source, cfg, base)
+    p = make_problem(mset, source, cfg, base, effects_on=effects_on)
     log.info("loop on %s: fit %s, held out %s, candidates %s", source, [t.name for t in p.targets if t.fit],
              [t.name for t in p.targets if not t.fit], p.candidates)
+    p.reference_attribution = reference_attribution(p, simulate, cfg)
     round_zero([p], simulate, cfg, db_path, tkey, progress)
     if on_round is not None:
         on_round(0, [p])
     run_rounds([p], simulate, cfg, db_path, tkey, cfg.max_rounds, on_round, progress)
+    sigma, where = noise_estimate(mset, cfg.noise_px)
+    check_all([p], simulate, cfg, {p.name: sigma})
+    p.final["noise_source"] = where
     return p

@@ -1,18 +1,21 @@
-"""Self-test: measured-like sets made by the twin with one hidden effect, then the loop on each.
+"""Self-test: measured-like sets made by the twin with hidden effects, then the loop on each, as in real use.
 
-For every candidate effect and run: draw a strength s in [strength_low, strength_high] nominal steps
-(stratified, so the runs of one effect span the range), for a multi-dof effect a random unit direction
-over its dofs (positive where only positive is physical), simulate the states with the effect switched on, add detector-like noise (Gaussian,
-`noise_px` per coordinate), and save the result in the generic measured format. The loop then reads
-each file back knowing only its states and markers, starts from the same twin as every other run,
-and says which effect it adds. Effects that need something to touch (friction, mount, ...) are only
-visible with surface contact, so the starting twin has `base_effects` on; an injected effect that is
-itself a base effect is injected into a twin without it. Every run of a batch advances in lockstep.
+Every run starts from the same twin as the real mode (no contact; `base_effects` on, none by default)
+and injects one *case*: a single effect, a dependent pair (friction or a mount offset with the surface
+contact they act through), a pair of independent effects, or an effect outside the candidate list
+(`unlisted:<name>`: an image-space barrel distortion the camera similarity cannot express, and a skin
+defect that displaces a patch of markers), alone or with in-list ones. Strength per injected effect:
+s in [strength_low, strength_high] nominal steps (stratified over the case's runs; a multi-dof effect
+takes a random unit direction). Detector-like Gaussian noise `noise_px` per coordinate is added, the set
+is saved in the generic format and read back: the loop knows only the file. It must name the exact in-list
+set, and report `unexplained` exactly when an out-of-list effect is in the data (loop.unexplained).
+Every run of a batch advances in lockstep. Size: `cases` x `runs_per_case` (conf/loop/*.yaml).
 """
 
 from __future__ import annotations
 
 import logging
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
@@ -25,25 +28,75 @@ from palpation.loop.effects import EFFECTS, PARAMS, move
 from palpation.loop.engine import Problem, evaluate, initial_params, run_rounds
 from palpation.loop.inputs import Target
 from palpation.loop.real import make_problem
+from palpation.loop.residual import CENTRE_PX
+from palpation.loop.unexplained import check_all, noise_estimate
 from palpation.measured import MeasuredState, load_measured_set, make_measured_set, save_measured_set
 
 log = logging.getLogger(__name__)
-COLUMNS = ("run", "effect_injected", "strength", "effect_named", "mae_before_px", "mae_after_px")
+COLUMNS = ("run", "effects_injected", "strength", "effects_named", "mae_before_px", "mae_after_px",
+           "excess_ratio")
+UNLISTED_PREFIX = "unlisted:"
+DISTORTION_RADIUS_PX = 400.0  # ~ the image circle's radius
+DISTORTION_K = 0.02  # barrel coefficient per nominal step: 8 px at r = 400 px per step
+DEFECT_MARKERS = 7  # a patch: a marker and its 6 neighbours
+DEFECT_PX = 4.0  # patch displacement per nominal step
+
+
+def _distortion(m: np.ndarray, s: float, rng) -> np.ndarray:
+    q = m - CENTRE_PX
+    r2 = (q ** 2).sum(axis=-1, keepdims=True) / DISTORTION_RADIUS_PX ** 2
+    return CENTRE_PX + q * (1.0 + DISTORTION_K * s * r2)
+
+
+def _defect(m: np.ndarray, s: float, rng) -> np.ndarray:
+    rest = m[0]
+    centre = rng.integers(len(rest))
+    patch = np.argsort(np.linalg.norm(rest - rest[centre], axis=1))[:DEFECT_MARKERS]
+    angle = rng.uniform(0, 2 * np.pi)
+    out = m.copy()
+    out[:, patch] += DEFECT_PX * s * np.array([np.cos(angle), np.sin(angle)])
+    return out
+
+
+# out-of-list effects: marker-space transforms of all states of a set, (S, 127, 2) -> same
+UNLISTED = {"image_distortion": _distortion, "marker_defect": _defect}
 
 
 @dataclass
 class Injection:
     run: int
-    effect: str
-    strength: float
-    betas: dict[str, float]  # nominal steps per dof
+    effects: list[str]  # in-list
+    unlisted: list[str]
+    strengths: dict[str, float]  # per injected effect, nominal steps
+    betas: dict[str, float]  # nominal steps per dof of the in-list effects
     base_effects: list[str]
     params: dict[str, float]  # the twin that made the data
 
+    @property
+    def label(self) -> str:
+        return "+".join([*self.effects, *(UNLISTED_PREFIX + u for u in self.unlisted)])
 
-def base_for(effect: str, cfg: LoopConfig, base: Mapping[str, float]) -> tuple[list[str], dict[str, float]]:
-    """The starting twin of a run: base effects on (minus the injected one, which starts off)."""
-    on = [e for e in cfg.selftest.base_effects if e != effect]
+
+def parse_case(case: str, base_effects, where: str = "loop.selftest.cases") -> tuple[list[str], list[str]]:
+    """'surface_contact+friction' -> (['surface_contact', 'friction'], []); 'unlisted:x' -> ([], ['x'])."""
+    parts = [c.strip() for c in str(case).split("+") if c.strip()]
+    inl = [c for c in parts if not c.startswith(UNLISTED_PREFIX)]
+    unl = [c[len(UNLISTED_PREFIX):] for c in parts if c.startswith(UNLISTED_PREFIX)]
+    bad = [c for c in inl if c not in EFFECTS] + [UNLISTED_PREFIX + u for u in unl if u not in UNLISTED]
+    if bad or not parts:
+        raise ValueError(f"{where}: case '{case}' names unknown effect(s) {bad}; known: {sorted(EFFECTS)} and "
+                         f"{[UNLISTED_PREFIX + u for u in UNLISTED]}, joined with '+'")
+    for e in inl:
+        missing = [r for r in EFFECTS[e].requires if r not in inl and r not in base_effects]
+        if missing:
+            raise ValueError(f"{where}: case '{case}': {e} acts only through {missing}; inject them together "
+                             f"('{'+'.join([*missing, e])}') or add them to loop.selftest.base_effects")
+    return inl, unl
+
+
+def base_for(effects, cfg: LoopConfig, base: Mapping[str, float]) -> tuple[list[str], dict[str, float]]:
+    """The starting twin of a run: base effects on, minus injected ones (they start off)."""
+    on = [e for e in cfg.selftest.base_effects if e not in effects]
     params = initial_params({**base, **cfg.selftest.base_params})
     for e in cfg.selftest.base_effects:
         if e not in on:
@@ -53,27 +106,31 @@ def base_for(effect: str, cfg: LoopConfig, base: Mapping[str, float]) -> tuple[l
 
 def draw_injections(cfg: LoopConfig, base: Mapping[str, float], rng: np.random.Generator) -> list[Injection]:
     st, steps, out = cfg.selftest, dict(cfg.steps), []
-    for effect in st.effects:
-        for r in range(st.runs_per_effect):
-            on, params = base_for(effect, cfg, base)
-            # stratified: run r draws from the r-th of runs_per_effect equal slices of [low, high]
-            span = st.strength_high - st.strength_low
-            s = float(st.strength_low + span * (r + rng.uniform()) / st.runs_per_effect)
-            dofs = EFFECTS[effect].dofs
-            u = rng.normal(size=len(dofs))
-            # "switched on": a one-dof effect grows; a multi-dof one (camera, mount) goes any way
-            u = np.where([d.nonneg or len(dofs) == 1 for d in dofs], np.abs(u), u) / np.linalg.norm(u)
-            betas = {d.name: float(s * ui) for d, ui in zip(dofs, u)}
-            for d in dofs:
-                params = move(params, d, betas[d.name], steps)
-            out.append(Injection(len(out), effect, s, betas, on, params))
+    span = st.strength_high - st.strength_low
+    for case in st.cases:
+        inl, unl = parse_case(case, st.base_effects)
+        for r in range(st.runs_per_case):
+            on, params = base_for(inl, cfg, base)
+            strengths, betas = {}, {}
+            for e in [*inl, *unl]:
+                # stratified: run r draws from the r-th of runs_per_case equal slices of [low, high]
+                strengths[e] = float(st.strength_low + span * (r + rng.uniform()) / st.runs_per_case)
+            for e in inl:
+                dofs = EFFECTS[e].dofs
+                u = rng.normal(size=len(dofs))
+                # "switched on": a one-dof effect grows; a multi-dof one (camera, mount) goes any way
+                u = np.where([d.nonneg or len(dofs) == 1 for d in dofs], np.abs(u), u) / np.linalg.norm(u)
+                for d, ui in zip(dofs, u):
+                    betas[f"{e}.{d.name}"] = float(strengths[e] * ui)
+                    params = move(params, d, betas[f"{e}.{d.name}"], steps)
+            out.append(Injection(len(out), inl, unl, strengths, betas, on, params))
     return out
 
 
 def make_sets(injections: list[Injection], states: list[Target], simulate, noise_px: float,
               rng: np.random.Generator, out_dir: Path, geometry: Mapping[str, MeasuredState],
               rest_px: np.ndarray) -> list[Path]:
-    """Simulate every injected twin at `states` (one batch), add noise, save each as a measured set."""
+    """Simulate every injected twin at `states` (one batch), apply out-of-list effects, add noise, save."""
     jobs = [(t.state, inj.params) for inj in injections for t in states]
     markers, failed = simulate(jobs)
     if failed.any():
@@ -82,6 +139,8 @@ def make_sets(injections: list[Injection], states: list[Target], simulate, noise
                          "(loop.selftest.strength_high) or the nominal steps (loop.steps)")
     paths = []
     for inj, block in zip(injections, markers.reshape(len(injections), len(states), -1, 2)):
+        for u in inj.unlisted:
+            block = UNLISTED[u](block, inj.strengths[u], rng)
         noisy = block + rng.normal(0.0, noise_px, block.shape)
         mset = make_measured_set(noisy, np.ones(noisy.shape[:2], bool), rest_px,
                                  [geometry[t.name] for t in states], source="palpation.loop.selftest",
@@ -95,54 +154,79 @@ def make_sets(injections: list[Injection], states: list[Target], simulate, noise
 def run_selftest(cfg: LoopConfig, simulate, base: Mapping[str, float], template: list[Target],
                  geometry: Mapping[str, MeasuredState], rest_px: np.ndarray, out_dir: Path, db_path: Path,
                  tkey: str, progress: bool = False) -> tuple[list[dict], list[Problem], list[Injection]]:
-    """Make the sets, run the loop on each (it only reads the files), and score what it names.
-
-    The runs advance in lockstep: `progress` shows their rounds and, per recalibration, the trials of
-    all runs together."""
+    """Make the sets, run the loop on each (it only reads the files), and score what it names."""
     cfg.validate()
     rng = np.random.default_rng(cfg.selftest.seed)
     injections = draw_injections(cfg, base, rng)
     paths = make_sets(injections, template, simulate, cfg.selftest.noise_px, rng, Path(out_dir) / "sets",
                       geometry, rest_px)
-    problems = []
+    problems, sigmas = [], {}
     for inj, path in zip(injections, paths):
         mset = load_measured_set(path)
-        _, start = base_for(inj.effect, cfg, base)
+        on, start = base_for(inj.effects, cfg, base)
         p = make_problem(mset, str(path), cfg, {}, name=f"run{inj.run:03d}", holdout=cfg.selftest.holdout,
-                         states=cfg.selftest.states, effects_on=inj.base_effects, candidates=cfg.effects)
+                         states=cfg.selftest.states, effects_on=on, candidates=cfg.effects)
         p.params = dict(start)
+        sigmas[p.name] = noise_estimate(mset, cfg.noise_px)[0]
         problems.append(p)
     evaluate(problems, simulate)
     before = [p.summary() for p in problems]
     run_rounds(problems, simulate, cfg, db_path, tkey, cfg.selftest.max_rounds, progress=progress)
+    check_all(problems, simulate, cfg, sigmas)
     rows = []
     for inj, p, b in zip(injections, problems, before):
-        added = [r["effect"] for r in p.rounds if r["accepted"] and r["effect"]]
-        first = p.rounds[0] if p.rounds else {}
-        rows.append({"run": inj.run, "effect_injected": inj.effect, "strength": inj.strength,
-                     "effect_named": added[0] if added else "none", "mae_before_px": b["all"],
-                     "mae_after_px": p.summary()["all"], "attribution_top": first.get("effect") or "none",
-                     "share_explained": first.get("share_explained", 0.0), "betas": inj.betas,
-                     "injected": {k: inj.params[k] for e in [inj.effect] for k in EFFECTS[e].params},
-                     "recovered": {k: p.params[k] for e in [inj.effect] for k in EFFECTS[e].params}})
+        added = [e for r in p.rounds if r["accepted"] for e in r.get("effects", [])]
+        unexplained = bool(p.final["test"]["unexplained"])
+        named = [*added, *(["unexplained"] if unexplained else [])]
+        rows.append({"run": inj.run, "effects_injected": inj.label,
+                     "strength": float(np.mean(list(inj.strengths.values()))),
+                     "effects_named": "+".join(named) or "none", "mae_before_px": b["all"],
+                     "mae_after_px": p.summary()["all"], "excess_ratio": p.final["test"]["excess_ratio"],
+                     "injected_effects": inj.effects, "unlisted": inj.unlisted, "named": added,
+                     "unexplained": unexplained, "strengths": inj.strengths, "betas": inj.betas,
+                     "tries": [{"round": r["round"], "effects": r.get("effects", []), "accepted": r["accepted"]}
+                               for r in p.rounds],
+                     "injected": {k: inj.params[k] for e in inj.effects for k in EFFECTS[e].params},
+                     "recovered": {k: p.params[k] for e in inj.effects for k in EFFECTS[e].params}})
     return rows, problems, injections
 
 
 def confusion(rows: list[dict], effects: list[str]) -> dict[str, dict[str, int]]:
-    names = list(effects) + ["none"]
-    table = {e: {n: 0 for n in names} for e in effects}
+    """Rows: what the loop named (each effect, `unexplained`, `none`); columns: what was injected (each
+    effect, and `unlisted` for an out-of-list one). A run counts once in every (named, injected) cell."""
+    cols = [*effects, "unlisted"]
+    table = {n: {c: 0 for c in cols} for n in [*effects, "unexplained", "none"]}
     for r in rows:
-        table[r["effect_injected"]][r["effect_named"] if r["effect_named"] in names else "none"] += 1
+        inj = [*r["injected_effects"], *(["unlisted"] if r["unlisted"] else [])]
+        named = [*r["named"], *(["unexplained"] if r["unexplained"] else [])] or ["none"]
+        for n in named:
+            for c in inj:
+                table.setdefault(n, {c2: 0 for c2 in cols})[c] += 1
     return table
 
 
 def summary(rows: list[dict]) -> dict:
-    cut = [1.0 - r["mae_after_px"] / r["mae_before_px"] for r in rows if r["mae_before_px"] > 0]
-    return {"runs": len(rows), "named_correctly": float(np.mean([r["effect_named"] == r["effect_injected"]
-                                                                 for r in rows])),
-            "mae_cut_mean": float(np.mean(cut)),
+    """The issue-13 aims: exact in-list set, MAE cut (in-list), out-of-list -> unexplained, no false
+    unexplained; and the gate's false-accept / false-reject rates over every try."""
+    inl = [r for r in rows if not r["unlisted"]]
+    out = [r for r in rows if r["unlisted"]]
+    exact = [set(r["named"]) == set(r["injected_effects"]) and not r["unexplained"] for r in inl]
+    cut = [1.0 - r["mae_after_px"] / r["mae_before_px"] for r in inl if r["mae_before_px"] > 0]
+    tries = [(t, r) for r in rows for t in r["tries"] if t["effects"]]
+    wrong = [t for t, r in tries if not set(t["effects"]) <= set(r["injected_effects"])]
+    right = [t for t, r in tries if set(t["effects"]) <= set(r["injected_effects"])]
+    nan = float("nan")
+    return {"runs": len(rows), "in_list_runs": len(inl), "out_of_list_runs": len(out),
+            "exact_named": float(np.mean(exact)) if exact else nan,
+            "mae_cut_mean": float(np.mean(cut)) if cut else nan,
+            "out_of_list_unexplained": float(np.mean([r["unexplained"] for r in out])) if out else nan,
+            "in_list_unexplained": int(sum(r["unexplained"] for r in inl)),
+            "gate_false_accept": float(np.mean([t["accepted"] for t in wrong])) if wrong else nan,
+            "gate_false_reject": float(np.mean([not t["accepted"] for t in right])) if right else nan,
+            "gate_tries": len(tries),
             "mae_before_mean_px": float(np.mean([r["mae_before_px"] for r in rows])),
-            "mae_after_mean_px": float(np.mean([r["mae_after_px"] for r in rows]))}
+            "mae_after_mean_px": float(np.mean([r["mae_after_px"] for r in rows])),
+            "cases": dict(Counter(r["effects_injected"] for r in rows))}
 
 
 def rows_csv(rows: list[dict]) -> str:

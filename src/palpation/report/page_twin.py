@@ -119,27 +119,12 @@ def calibration(df: pd.DataFrame) -> Section:
     return Section("calibration", TITLES["calibration"], body, bullets, gaps, set(df["interaction"]))
 
 
-def _md_table(text: str, heading: str) -> list[dict] | None:
-    """Rows of the first Markdown table under the heading that contains `heading`, or None."""
-    lines = text.splitlines()
-    start = next((n for n, line in enumerate(lines) if line.startswith("#") and heading in line), None)
-    if start is None:
-        return None
-    cells = []
-    for line in lines[start + 1:]:
-        if line.startswith("#") or (cells and not line.startswith("|")):
-            break
-        if line.startswith("|"):
-            cells.append([c.strip() for c in line.strip().strip("|").split("|")])
-    return [dict(zip(cells[0], row)) for row in cells[2:]] if len(cells) > 2 else None
-
-
 def _interaction(photo: str) -> str | None:
     m = re.match(r"(press|twist_z|twist_x|slide)", photo)
     return m.group(1) if m else None
 
 
-def loop(df: pd.DataFrame, report_md: str | None = None) -> Section:
+def loop(df: pd.DataFrame, per_state: pd.DataFrame | None = None) -> Section:
     rows = [[int(r["round"]), r["effect_added"] if r["effect_added"] != "none" else "calibrated twin",
              num(r["mae_fit_px"], 2), num(r["mae_heldout_px"], 2), num(r["mae_mean_mm"], 3),
              num(r["mae_mean_mm"] / MM_PER_PX, 2)] for _, r in df.iterrows()]
@@ -158,23 +143,20 @@ def loop(df: pd.DataFrame, report_md: str | None = None) -> Section:
                f"Held-out photo: {first['mae_heldout_px']:.2f} → {last['mae_heldout_px']:.2f} px over "
                f"{len(df) - 1} kept round(s)."]
     gaps = [Gap(None, "mae_mean_mm", final_mm - paper_mm, None)]
-    photos = _md_table(report_md, "Per photo") if report_md else None
     names = set()
-    if photos and {"photo", "final px"} <= set(photos[0]):
+    if per_state is not None and {"state", "final_px"} <= set(per_state.columns):  # loop/tables/per_state.csv
         prow = []
-        for p in photos:
-            i = _interaction(p["photo"])
+        for _, p in per_state.iterrows():
+            i = _interaction(p["state"])
             twin = CALIBRATION_MAE.get(i, {}).get("twin")
-            try:
-                final = float(p["final px"])
-            except ValueError:
-                continue
-            prow.append([p["photo"], p.get("fit", ""), p.get("undeformed sensor px", ""), p.get("round 0 px", ""),
+            final = float(p["final_px"])
+            fit = "yes" if str(p.get("fit")) == "True" else "held out"
+            prow.append([p["state"], fit, num(p.get("baseline_px"), 2), num(p.get("round0_px"), 2),
                          num(final, 2), num(twin, 2), signed(final - twin, 2) if twin else "–"])
             if twin:
                 gaps.append(Gap(i, "final_px", final - twin, None))
                 names.add(i)
-        body += ("\nPer photo (from `loop/report.md`), beside the paper's twin on the same interaction:\n\n"
+        body += ("\nPer photo (from `loop/tables/per_state.csv`), beside the paper's twin on the same interaction:\n\n"
                  + markdown(["photo", "fit", "undeformed px", "round 0 px", "final px", "paper twin px",
                              "final − paper twin"], prow))
     return Section("loop", TITLES["loop"], body, bullets, gaps, names)

@@ -15,6 +15,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+import pandas as pd
 import yaml
 
 from palpation.io import save_text
@@ -135,11 +136,11 @@ def header(root: Path, info: dict, built_commit: str) -> str:
 def sections(root: Path, k: float = 2.0) -> dict[str, Section | None]:
     """Every table of ORDER as a Section, or None where its main input is missing."""
     t = {key: read_table(root, key) for key in SOURCES}
-    loop_md = root / "loop" / "report.md"
+    loop_states = root / "loop" / "tables" / "per_state.csv"
     build = {
         "data": lambda: twin.data_sets(t["data"], t["seed_sweep"], t["table4_markers"]),
         "calibration": lambda: twin.calibration(t["calibration"]),
-        "loop": lambda: twin.loop(t["loop"], loop_md.read_text() if loop_md.exists() else None),
+        "loop": lambda: twin.loop(t["loop"], pd.read_csv(loop_states) if loop_states.exists() else None),
         "seed_sweep": lambda: training.seed_sweep_section(t["seed_sweep"], k),
         "table3": lambda: training.table3_section(t["table3"], k),
         "table4_markers": lambda: training.table4_markers_section(t["table4_markers"], t["seed_sweep"], k),

@@ -48,6 +48,14 @@ EFFECT_TITLES = {
     "layered": "layered skin: stiffer outer shell (E_shell / E)",
     "marker_anchor": "marker binding offset: markers anchored at the rest template",
 }
+# effects that act only through another one (their parameters `need` a switch that effect turns on): friction
+# touches nothing until the sensor touches the phantom, so without surface contact its signature is dead and
+# the loop can only find it together with it (loop.engine tries such pairs jointly). loop.effects checks this
+# against the `needs` of the entries below. The mount is not one: without contact it still moves the markers
+# through the dome's inertia (the self-test measured it explaining 95 % of a viscous residual with no contact).
+EFFECT_REQUIRES = {
+    "friction": ("surface_contact",),
+}
 
 
 @dataclass(frozen=True)
