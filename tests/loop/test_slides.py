@@ -57,8 +57,12 @@ def test_replay_markers_and_metrics():
     mesh = cached_sensor_mesh("coarse")
     s = toy_set(1, 2, step_mm=1.5)
     binding = bind_markers(mesh.nodes, mesh.dome_nodes, s.rest)
-    markers, failed = replay(mesh, TwinConfig(), binding, s, make_scene(s), [{"k_f": 1e7}, {"k_f": 1e8}])
-    assert markers.shape == (2, 1, 2, 127, 2) and not failed.any() and np.isfinite(markers).all()
+    markers, failed = replay(mesh, TwinConfig(), binding, s, make_scene(s),
+                             [{"k_f": 1e7}, {"k_f": 1e8}, {"k_f": 1e7, "marker_anchor": 1.0}])
+    assert markers.shape == (3, 1, 2, 127, 2) and not failed.any() and np.isfinite(markers).all()
+    np.testing.assert_allclose(markers[2] - markers[0], np.broadcast_to(binding.template_px - binding.rest_px,
+                                                                        markers[0].shape), atol=1e-6)
+    markers = markers[:2]
     moved = np.linalg.norm(markers - binding.rest_px, axis=-1).mean(axis=-1)
     assert (moved[1] > moved[0]).all()  # a stiffer phantom deforms the dome more at the same depth
     mae = frame_mae(markers, s)

@@ -12,12 +12,13 @@ import logging
 import time
 
 import hydra
+import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from palpation.config_check import app_main
 from palpation.io import csv_text, save_json, save_text
 from palpation.loop.slide_loop import COLUMNS, SlideLoopSettings, run_slide_loop
-from palpation.loop.slides import make_scene, replay
+from palpation.loop.slides import frame_mae, make_scene, replay
 from palpation.measured_sequences import SequenceSet, load_sequence_set
 from palpation.twin.config import TwinConfig
 from palpation.twin.markers import bind_markers
@@ -61,6 +62,11 @@ def run(cfg: DictConfig) -> dict:
 
     start = time.perf_counter()
     result = run_slide_loop(evaluate, sub, settings, numbers)
+    # the floor a twin must beat: no motion at all (every frame predicted as the rest template)
+    static = frame_mae(np.broadcast_to(sub.rest, sub.markers.shape).astype(np.float64), sub)
+    result["static_mae_px"] = {f: float(static[[numbers.index(t) for t in ts]].mean())
+                               for f, ts in result["folds"].items()}
+    log.info("no-motion floor (rest template as every frame), per fold: %s", result["static_mae_px"])
     wall = time.perf_counter() - start
     save_text(cfg.out.csv, csv_text(result["rows"], COLUMNS, 4, na_rep="nan"))
     size = {"trials": numbers, "frames": list(cfg.frames) if cfg.frames is not None else [0, sset.n_frames],

@@ -30,8 +30,10 @@ from palpation.twin.trajectory import (APPROACH_Z_M, BASE_ROTATION, CENTRE_XY_M,
                                        PHANTOM_TOP_M, REACH_TOL_M, SPEED_CAP_M_S, Trajectory, padded_schedule,
                                        pose_matrix)
 
-SCHEDULE_KEYS = ("mount_dz_mm",)
-REACH_M = 0.030  # dome footprint radius (19 mm) + the widest inclusion spread (8 mm) + margin  # registry parameters the replay applies to the poses, not the kernels
+# registry parameters the replay applies outside the kernels: to the poses (mount dz) or to the projected
+# markers (anchor: that fraction of the rest offset template - bound rest, as twin.config.MarkerConfig)
+SCHEDULE_KEYS = ("mount_dz_mm", "marker_anchor")
+REACH_M = 0.030  # dome footprint radius (19 mm) + the widest inclusion spread (8 mm) + margin
 
 
 @dataclass(frozen=True)
@@ -117,7 +119,7 @@ def replay(mesh: SensorMesh, cfg: TwinConfig, binding: MarkerBinding, sset: Sequ
     """Every candidate on every trial of `sset`, one batch: markers (C, T, F, 127, 2) px and failed (C, T).
     `cfg` is the base twin; the scene (compliant phantom, the vessels near these slides) is added here."""
     tip_B = tip_node_B(mesh)
-    reqs, trajs, samples = [], [], []
+    reqs, trajs, samples, anchors = [], [], [], []
     for params in candidates:
         env, sched = split_params(params)
         for t in range(sset.n_trials):
@@ -125,6 +127,7 @@ def replay(mesh: SensorMesh, cfg: TwinConfig, binding: MarkerBinding, sset: Sequ
             traj, frames = plan_replay(sset.pose_mm[t], scene, tip_B, sched.get("mount_dz_mm", 0.0), cfg.frame_dt)
             trajs.append(traj)
             samples.append(frames)
+            anchors.append(sched.get("marker_anchor", 0.0))
     schedule, _ = padded_schedule(trajs)
     cfg = scene_config(cfg, scene.near(schedule[:, :, :2, 3]))
     reqs = [r.resolved(cfg) for r in reqs]
@@ -139,6 +142,7 @@ def replay(mesh: SensorMesh, cfg: TwinConfig, binding: MarkerBinding, sset: Sequ
             out[env_ix, frame_ix] = project_markers_np(binding, nodes, schedule[f, env_ix])
         if f >= samples.max():
             break
+    out += np.array(anchors)[:, None, None, None] * (binding.template_px - binding.rest_px)
     failed = batch.sim.failed() | ~np.all(np.isfinite(out), axis=(1, 2, 3))
     shape = (len(candidates), sset.n_trials)
     return out.reshape(*shape, *out.shape[1:]), failed.reshape(shape)
