@@ -93,6 +93,8 @@ def test_rounds_pick_the_effect_that_lowers_the_fitted_error():
         assert [r["effect_added"] for r in fr] == ["none", "friction", "compliant_phantom"]  # then nothing helps
         assert fr[-1]["mae_fit_px"] < fr[0]["mae_fit_px"] and fr[-1]["mae_heldout_px"] < fr[0]["mae_heldout_px"]
     assert result["folds"] == {"odd": [1, 3], "even": [2, 4]}
+    modes = rows[0]["modes_heldout"]  # a uniform offset of the fake twin: all translation
+    assert modes["share_translation"] == pytest.approx(1.0) and modes["mae_over_vessel_px"] > 0
     with pytest.raises(ValueError, match="leaves its physical bounds"):
         SlideLoopSettings(effects={"f": {"mu": [3.0]}}).validate()
     with pytest.raises(ValueError, match="unknown parameter 'young'"):

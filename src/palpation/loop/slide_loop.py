@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from palpation.loop.folds import other, trial_folds
-from palpation.loop.slides import SCHEDULE_KEYS, frame_mae, vessel_ratio
+from palpation.loop.slides import SCHEDULE_KEYS, frame_mae, slide_modes, vessel_ratio
 from palpation.measured_sequences import SequenceSet
 from palpation.twin.parameters import PARAMETERS
 
@@ -76,7 +76,7 @@ def run_fold(evaluate: Evaluate, fit: SequenceSet, held: SequenceSet, settings: 
         m_held, mae_held = _score(evaluate, held, [current])
         r = {"fold": fold, "round": k, "effect_added": effect, "mae_fit_px": float(mae_fit),
              "mae_heldout_px": float(mae_held[0]), "vessel_ratio_sim": vessel_ratio(m_held[0], held.labels),
-             "vessel_ratio_real": real_ratio}
+             "vessel_ratio_real": real_ratio, "modes_heldout": slide_modes(m_held[0], held)}
         log.info("fold %s round %d (%s): fit %.3f px, held-out %.3f px, vessel ratio sim %.3f / real %.3f",
                  fold, k, effect, r["mae_fit_px"], r["mae_heldout_px"], r["vessel_ratio_sim"], real_ratio)
         return r

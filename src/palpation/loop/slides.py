@@ -166,3 +166,21 @@ def vessel_ratio(markers: np.ndarray, labels: np.ndarray | None) -> float:
     if not on.any() or not off.any():
         return float("nan")
     return float(motion[on].mean() / motion[off].mean())
+
+
+def slide_modes(sim: np.ndarray, sset: SequenceSet) -> dict:
+    """The residual of every frame split into the photo loop's modes (loop.residual), averaged over the
+    frames of `sset`, plus the MAE over the vessel-labelled markers and off them (the detector's split)."""
+    from palpation.loop.residual import MODES, decompose
+
+    rows = [decompose(sim[t, f], sset.markers[t, f]).row() for t in range(sset.n_trials) for f in range(sset.n_frames)]
+    out = {f"share_{m}": float(np.mean([r[f"share_{m}"] for r in rows])) for m in MODES}
+    for key in ("rotation_deg", "scale_pct", "stretch_pct"):
+        out[key] = float(np.mean([r[key] for r in rows]))
+    out["translation_px"] = np.mean([r["translation_px"] for r in rows], axis=0).tolist()
+    if sset.labels is not None:
+        err = np.linalg.norm(np.asarray(sim, np.float64) - sset.markers, axis=-1)
+        on, off = (sset.labels == 1) & sset.found, (sset.labels == 0) & sset.found
+        out["mae_over_vessel_px"] = float(err[on].mean()) if on.any() else float("nan")
+        out["mae_off_vessel_px"] = float(err[off].mean()) if off.any() else float("nan")
+    return out
