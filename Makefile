@@ -6,7 +6,7 @@ PY := $(VENV)/bin/python
 export PATH := $(abspath $(VENV))/bin:$(PATH)
 CORES ?= 2
 
-.PHONY: setup reproduce test lock bench paper
+.PHONY: setup setup-gpu reproduce test lock bench paper
 
 $(VENV)/.installed: environment.lock pyproject.toml
 	python3 -m venv $(VENV)
@@ -16,6 +16,16 @@ $(VENV)/.installed: environment.lock pyproject.toml
 	touch $@
 
 setup: $(VENV)/.installed
+
+# A CUDA machine whose python already holds a CUDA torch: install the project and every other pinned
+# package of environment.lock into that python WITHOUT touching torch (the lock's torch line is dropped
+# from the constraints; pyproject's unpinned `torch` is then already satisfied). Offline:
+#   make setup-gpu PIP_ARGS="--no-index --find-links /path/to/wheels"
+GPU_PY ?= python3
+setup-gpu:
+	grep -v -E '^torch==' environment.lock > .gpu-constraints.txt
+	$(GPU_PY) -m pip install $(PIP_ARGS) -c .gpu-constraints.txt -e ".[test]"
+	$(GPU_PY) -c "import torch, warp as wp, hydra, omegaconf; wp.init(); print('torch', torch.__version__, 'cuda', torch.cuda.is_available(), 'warp', wp.__version__, wp.get_cuda_devices())"
 
 reproduce: setup
 	snakemake --cores $(CORES)

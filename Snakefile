@@ -25,18 +25,18 @@ from palpation.killed_jobs import killed_outputs  # a killed forced rerun's miss
 rule all:
     default_target: True
     input:
-        rules.measured_photos.output,
-        rules.silicone_set.output,
-        rules.silicone_check.output,
-        rules.meat_set.output,
-        rules.data_summary.output,
-        rules.render_twin.output,
-        rules.calibrate.output,
-        rules.loop.output,
-        rules.train_report.output,
-        TWIN_ABLATION_FILES,  # common.smk: empty where the profile skips the dataset-twin ablation
-        rules.vessel_maps.output,
-        rules.results_page.output,
+        plain(rules.measured_photos.output),
+        plain(rules.silicone_set.output),
+        plain(rules.silicone_check.output),
+        plain(rules.meat_set.output),
+        plain(rules.data_summary.output),
+        plain(rules.render_twin.output),
+        plain(rules.calibrate.output),
+        plain(rules.loop.output),
+        plain(rules.train_report.output),
+        plain(TWIN_ABLATION_FILES),  # common.smk: empty where the profile skips the dataset-twin ablation
+        plain(rules.vessel_maps.output),
+        plain(rules.results_page.output),
         killed_outputs(),
 
 

@@ -57,7 +57,7 @@ def test_process_gone():
     host, pid, start = me.split(":")
     assert not tracking.process_gone(me)
     assert tracking.process_gone(f"{host}:{_dead_pid()}:{start}")
-    assert tracking.process_gone(f"{host}:{pid}:{int(start) + 1}")  # same pid, another process
+    assert tracking.process_gone(f"{host}:{pid}:{float(start) + 1:.2f}")  # same pid, another process
     assert not tracking.process_gone(f"elsewhere:{_dead_pid()}:1")  # another host: unknown, left alone
 
 
@@ -66,7 +66,7 @@ def test_run_of_a_killed_process_is_marked_killed(results_tmp):
     code = (
         "import os, signal\n"
         "from palpation import tracking\n"
-        "with tracking.start_run('killed', params={'x': 1}, run_name='job'):\n"
+        "with tracking.start_run('killed', params={'x': 1}, config='job'):\n"
         "    os.kill(os.getpid(), signal.SIGKILL)\n"
     )
     assert subprocess.run([sys.executable, "-c", code], timeout=300).returncode == -9
@@ -78,9 +78,9 @@ def test_run_of_a_killed_process_is_marked_killed(results_tmp):
     # a RUNNING run of a live process (this one) and one of another host stay RUNNING
     alive = client.create_run(exp, tags={"process": tracking.process_id()}).info.run_id
     remote = client.create_run(exp, tags={"process": "elsewhere:1:1"}).info.run_id
-    [orphan] = [r for r in client.search_runs([exp]) if r.data.tags.get("mlflow.runName") == "job"]
+    [orphan] = [r for r in client.search_runs([exp]) if r.data.tags.get("mlflow.runName") == "killed/job"]
     assert orphan.info.status == "RUNNING"
-    with tracking.start_run("killed", params={"x": 1}, run_name="job") as run:
+    with tracking.start_run("killed", params={"x": 1}, config="job") as run:
         pass
     status = {r.info.run_id: r.info.status for r in client.search_runs([exp])}
     assert status[orphan.info.run_id] == "KILLED"
@@ -93,7 +93,7 @@ def test_rerun_of_a_job_supersedes_its_finished_run(results_tmp, monkeypatch):
     monkeypatch.setenv("SNAKEMAKE_RULE", "train")
     ids = []
     for params in ({"lr": 1}, {"lr": 2}, {"lr": 1}):
-        with tracking.start_run("rerun", params=params, run_name="A-to-B-L5-seed0") as run:
+        with tracking.start_run("rerun", params=params, config="A-to-B/L5", seed=0) as run:
             ids.append(run.info.run_id)
     import mlflow
 
@@ -113,3 +113,33 @@ def test_git_commit_override(monkeypatch):
     assert git_commit() == "abc123"
     monkeypatch.delenv("PALPATION_GIT_COMMIT")
     assert git_commit() != "abc123"
+
+
+def test_run_names_kind_span_and_linked_artefacts(results_tmp, tmp_path, monkeypatch):
+    """One name scheme, the runs view as the experiment's page, the run spanning the app's work, a
+    checkpoint stored once (hard link) and unchanged in MLflow when the run folder's file is rewritten."""
+    import time
+
+    import mlflow
+
+    from palpation.io import save_text
+
+    monkeypatch.setenv("PALPATION_PROFILE", "quick")
+    checkpoint = tmp_path / "checkpoint.pt"
+    save_text(checkpoint, "weights v1")
+    tracking.mark_work_start()
+    time.sleep(0.3)
+    with tracking.start_run("names", {"x": 1}, "A-to-B/L5", seed=3) as run:
+        tracking.log_artifact(checkpoint)
+    inode = checkpoint.stat().st_ino
+    save_text(checkpoint, "weights v2")  # a later run's atomic rewrite
+    client = mlflow.MlflowClient(tracking.tracking_uri())
+    got = client.get_run(run.info.run_id)
+    assert got.data.tags["mlflow.runName"] == "names/A-to-B/L5/seed3"
+    assert got.data.tags["launched_by"] == "hand"
+    assert got.info.end_time - got.info.start_time >= 300
+    exp = client.get_experiment_by_name("names")
+    assert exp.tags["mlflow.experimentKind"] == "custom_model_development"
+    [stored] = (results_tmp / "mlartifacts" / "names").rglob("checkpoint.pt")
+    assert stored.read_text() == "weights v1" and stored.stat().st_ino == inode  # one copy on disk
+    assert tracking.run_name("photos") == "photos/quick"

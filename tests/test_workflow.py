@@ -100,3 +100,8 @@ def test_lint_passes(tmp_path):
 def test_slurm_profile_dry_run(tmp_path):
     assert "simulate_canonical" in dry_run(tmp_path, "--workflow-profile",
                                            str(REPO_ROOT / "workflow/profiles/slurm"))
+
+
+def test_local_slurm_profile_dry_run(tmp_path):
+    """The profile run for real on a single-node cluster (workflow/scripts/slurm_local.sh) plans the tiny DAG."""
+    assert "train_report" in dry_run(tmp_path, "--workflow-profile", str(REPO_ROOT / "workflow/profiles/slurm-local"))

@@ -127,6 +127,9 @@ def app_main(app: str) -> Callable:
         @functools.wraps(main)
         def checked(cfg: DictConfig):
             try:
+                from palpation.tracking import mark_work_start
+
+                mark_work_start()
                 check_config(cfg, app)
                 if cfg.get("track", cfg.get("tracking", False)):
                     from palpation.tracking import check_store
@@ -139,3 +142,26 @@ def app_main(app: str) -> Callable:
                 raise SystemExit(f"{app}: error: {exc}") from None
         return checked
     return wrap
+
+
+def _app_doc(app: str) -> str:
+    """The app module's docstring: the first block of its `--help` (conf/hydra/help/app.yaml)."""
+    import importlib
+
+    doc = importlib.import_module(f"palpation.apps.{app}").__doc__ or ""
+    return f"palpation.apps.{app}: " + doc.strip()
+
+
+def _app_groups(app: str) -> str:
+    """The config groups this app composed, with the chosen option (Hydra's own groups left out)."""
+    from hydra.core.hydra_config import HydraConfig
+
+    choices = HydraConfig.get().runtime.choices
+    lines = [f"  {group}={option}" for group, option in sorted(choices.items())
+             if group != "hydra" and not group.startswith("hydra/")]
+    return "\n".join(lines) or "  (none: every option is listed below)"
+
+
+# Imported by every app before hydra.main runs, so `--help` can resolve them.
+OmegaConf.register_new_resolver("app_doc", _app_doc, replace=True)
+OmegaConf.register_new_resolver("app_groups", _app_groups, replace=True)

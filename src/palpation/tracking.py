@@ -19,6 +19,8 @@ import hashlib
 import json
 import os
 import subprocess
+import time
+import urllib.parse
 from pathlib import Path
 from typing import Any, Iterator, Mapping
 
@@ -123,10 +125,49 @@ def supersede(client: Any, experiment_id: str, key: str, new_run_id: str) -> lis
     return ids
 
 
+_work_started: float | None = None
+
+
+def mark_work_start() -> None:
+    """Called by `config_check.app_main` before an app's work: the app's run starts here, even when
+    the app opens it after the work (a run then spans what it tracks, not the last 50 ms)."""
+    global _work_started
+    _work_started = time.time()
+
+
+def run_name(stage: str, config: str | None = None, seed: int | str | None = None) -> str:
+    """One naming scheme for every stage: `<stage>/<config>[/seed<seed>]`; config defaults to the profile."""
+    parts = [stage, config or os.environ.get("PALPATION_PROFILE", "adhoc")]
+    if seed is not None:
+        parts.append(f"seed{seed}")
+    return "/".join(parts)
+
+
+def _sweep_tags() -> dict[str, str]:
+    """Where a run was launched from: the workflow (a Snakemake rule) or by hand, and which sweep."""
+    tags = {"launched_by": "snakemake" if os.environ.get("SNAKEMAKE_RULE") else "hand"}
+    try:
+        from hydra.core.hydra_config import HydraConfig
+
+        hc = HydraConfig.get()
+    except (ImportError, ValueError):  # not inside a Hydra job
+        return tags
+    if str(hc.mode) == "RunMode.MULTIRUN":
+        tags.update({"hydra_sweep": str(hc.sweep.dir), "hydra_job": str(hc.job.num)})
+    return tags
+
+
+def experiment_name(stage: str, tags: Mapping[str, str]) -> str:
+    """Hand-launched Hydra sweeps go to `<stage>-sweeps`, apart from the workflow's runs of `stage`."""
+    return f"{stage}-sweeps" if tags["launched_by"] == "hand" and "hydra_sweep" in tags else stage
+
+
 @contextlib.contextmanager
-def start_run(stage: str, params: Mapping[str, Any] | None = None, run_name: str | None = None,
-              tags: Mapping[str, str] | None = None) -> Iterator[Any]:
-    """Open an MLflow run in the experiment named after `stage`, with params and standard tags."""
+def start_run(stage: str, params: Mapping[str, Any] | None = None, config: str | None = None,
+              tags: Mapping[str, str] | None = None, seed: int | str | None = None) -> Iterator[Any]:
+    """Open an MLflow run named `run_name(stage, config, seed)` with params and standard tags.
+
+    The run starts when the app's work started (`mark_work_start`) if that is earlier than now."""
     import mlflow
 
     uri = tracking_uri()
@@ -134,13 +175,18 @@ def start_run(stage: str, params: Mapping[str, Any] | None = None, run_name: str
     lock.parent.mkdir(parents=True, exist_ok=True)
     flat = {k: str(v)[:500] for k, v in flatten(params or {}).items()}
     rule = os.environ.get("SNAKEMAKE_RULE", "none")
-    key = job_key(stage, rule, run_name, flat)
+    name = run_name(stage, config, seed)
+    key = job_key(stage, rule, name, flat)
+    where = _sweep_tags()
+    experiment_label = experiment_name(stage, where)
     with FileLock(str(lock), timeout=120):
         mlflow.set_tracking_uri(uri)
-        if mlflow.get_experiment_by_name(stage) is None:
-            # artefacts beside the store, not in ./mlruns of whatever folder the job started in
-            mlflow.create_experiment(stage, artifact_location=artifact_root(stage))
-        experiment = mlflow.set_experiment(stage)
+        if mlflow.get_experiment_by_name(experiment_label) is None:
+            # artefacts beside the store, not in ./mlruns of whatever folder the job started in; the
+            # kind tag makes MLflow 3's UI open the runs view instead of the GenAI traces page
+            mlflow.create_experiment(experiment_label, artifact_location=artifact_root(experiment_label),
+                                     tags={"mlflow.experimentKind": "custom_model_development"})
+        experiment = mlflow.set_experiment(experiment_label)
         client = mlflow.MlflowClient()
         close_orphans(client, experiment.experiment_id, by=process_id())
     all_tags = {
@@ -150,9 +196,14 @@ def start_run(stage: str, params: Mapping[str, Any] | None = None, run_name: str
         "snakemake_rule": rule,
         "job_key": key,
         "process": process_id(),
+        "mlflow.runName": name,
+        **where,
     }
-    all_tags.update(tags or {})
-    with mlflow.start_run(run_name=run_name, tags=all_tags) as run:
+    all_tags.update({k: str(v) for k, v in (tags or {}).items()})
+    started = min(_work_started or time.time(), time.time())
+    created = client.create_run(experiment.experiment_id, start_time=int(started * 1000), tags=all_tags,
+                                run_name=name)
+    with mlflow.start_run(run_id=created.info.run_id) as run:
         if flat:
             mlflow.log_params(flat)
         with FileLock(str(lock), timeout=120):
@@ -167,6 +218,29 @@ def log_metrics(metrics: Mapping[str, float], step: int | None = None) -> None:
 
 
 def log_artifact(path: str | os.PathLike, artifact_path: str | None = None) -> None:
+    """Log a file of the active run. On a local artefact store on the same file system the file is
+    hard-linked, not copied: a checkpoint then lives on disk once, in the run folder and in MLflow, and
+    an atomic rewrite by a later run (a new inode) leaves the older run's artefact as it was."""
     import mlflow
 
-    mlflow.log_artifact(str(path), artifact_path=artifact_path)
+    src = Path(path)
+    uri = mlflow.get_artifact_uri(artifact_path)
+    if uri.startswith("file://"):
+        dest = Path(urllib.parse.unquote(urllib.parse.urlparse(uri).path)) / src.name
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        with contextlib.suppress(FileNotFoundError):
+            dest.unlink()
+        try:
+            os.link(src, dest)
+            return
+        except OSError:  # another file system, or links not allowed: copy
+            pass
+    mlflow.log_artifact(str(src), artifact_path=artifact_path)
+
+
+def log_figure(stem: str | os.PathLike, artifact_path: str = "figures") -> None:
+    """Log a figure saved by `io.save_figure` (its .png and .pdf) of the active run."""
+    for suffix in (".png", ".pdf"):
+        path = Path(f"{stem}{suffix}")
+        if path.exists():
+            log_artifact(path, artifact_path)

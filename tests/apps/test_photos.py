@@ -47,3 +47,37 @@ def test_rest_photo_must_exist(tmp_path):
     with pytest.raises(ValueError, match="nope.jpg"):
         run(cfg)
     assert np.all([not p.exists() for p in tmp_path.iterdir()])
+
+
+def test_any_photo_set_with_a_manifest(tmp_path):
+    """Photos under other names, described by a CSV or YAML manifest, give the paper-named run's markers."""
+    import shutil
+
+    from palpation.markers.manifest import paper_names
+    from palpation.markers.photoset import list_photos
+
+    paper = {info.name: info for info in paper_names(list_photos(FLAT_TIP_PHOTOS))}
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    rows = [("zero.jpg", "rest", "0", "", "press_d0"), ("template.png", "rest", "0", "", "sensor_default_state"),
+            ("tw.jpg", "twist_x", "2", "20", "twist_x_d2_a20")]
+    for file, *_, name in rows:
+        shutil.copy(paper[name].path, photos / file)
+    csv = tmp_path / "manifest.csv"
+    csv.write_text("file,kind,depth,angle\n" + "".join(f"{f},{k},{d},{a}\n" for f, k, d, a, _ in rows))
+    yml = tmp_path / "manifest.yaml"
+    yml.write_text("photos:\n" + "".join(f"  - {{file: {f}, kind: {k}, depth: {d}, angle: {a or 'null'}}}\n"
+                                         for f, k, d, a, _ in rows))
+    ref = load_measured_set(run(compose_photos(f"out.dir={tmp_path}/ref", "track=false", "blob_counts=false",
+                                               "figure=false")) and tmp_path / "ref/measured_photos")
+    for manifest in (csv, yml):
+        out = tmp_path / manifest.suffix[1:]
+        run(compose_photos(f"photos_dir={photos}", f"photos_manifest={manifest}", "template_photo=template.png",
+                           "rest_photo=zero.jpg", f"out.dir={out}", "track=false", "blob_counts=false",
+                           "figure=false"))
+        mset = load_measured_set(out / "measured_photos")
+        assert [s.trajectory for s in mset.states] == ["rest", "rest", "twist_x"]
+        assert mset.states[2].angle_deg == 20.0 and mset.states[2].depth_mm == 2.0 and mset.found.all()
+        for state, (*_, name) in zip(mset.states, rows):
+            np.testing.assert_array_equal(mset.markers[mset.names.index(state.name)],
+                                          ref.markers[ref.names.index(name)])

@@ -18,3 +18,13 @@ def test_markdown_puts_the_paper_beside_ours():
             "| precision>=0.9@3mm |") in text
     assert ("| A-to-B | paper | 592 | 750 | 752 | 15,906 | 0.40 | 0.44 | 0.44 | 0.44 | 0.28 | 0.91 | 0.42 | **1.21** "
             "| 0.5739 | precision>=0.9@3mm |") in text
+
+
+def test_seed_verdicts_need_three_seeds_and_a_spread():
+    from palpation.report.compare import compare
+
+    assert compare(0.70, 0.0, 0.80, 0.001, n_ours=2).verdict() == "too few seeds to judge (2; 3 needed)"
+    assert compare(0.70, 0.0, 0.80, 0.001, n_ours=5).verdict() == "no spread over our 5 seeds to judge by"
+    assert compare(0.70, 0.0, 0.80, 0.001, n_ours=2).within is None
+    assert compare(0.70, 0.02, 0.80, 0.02, n_ours=5).verdict() == "**3.5σ lower**"
+    assert compare(0.79, 0.02, 0.80, 0.02, n_ours=3).within is True

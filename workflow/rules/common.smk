@@ -69,6 +69,12 @@ TWIN_ABLATION_FILES = (
 MAPS_CONFIGS = config["maps"].get("configs", TRAIN["experiments"])
 
 
+def plain(*outputs):
+    """Paths without their report() flags. Snakemake's report credits a flagged file to the first job that
+    lists it, input or output; consumers (rule all, results_page) list it plain so the producer is credited."""
+    return [str(f) for files in outputs for f in ([files] if isinstance(files, str) else files)]
+
+
 def hydra_dir(path):
     """Pin Hydra's run folder next to a rule's output so .hydra/config.yaml stays with it."""
     return f"hydra.run.dir={Path(path).parent} hydra.output_subdir=.hydra/{Path(path).stem}"
@@ -97,7 +103,7 @@ def calibration_outputs(out):
     return {
         "fit": f"{out}/twin_fit/fitted.yaml",
         "params": f"{out}/fitted_params.yaml",
-        "csv": f"{out}/calibration.csv",
+        "csv": report(f"{out}/calibration.csv", caption="../report/calibration_table.rst", category="Calibration"),
         "md": f"{out}/calibration.md",
         "json": f"{out}/calibration.json",
         "trials": f"{out}/trials.csv",

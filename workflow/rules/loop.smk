@@ -27,7 +27,7 @@ rule loop:
         conf=LOOP_CONF,
     output:
         report=f"{LOOP_DIR}/report.md",
-        csv=f"{LOOP_DIR}/loop_real.csv",
+        csv=report(f"{LOOP_DIR}/loop_real.csv", caption="../report/loop_table.rst", category="Residual loop"),
         rounds=f"{LOOP_DIR}/rounds.json",
         fit=f"{LOOP_DIR}/twin_fit/fitted.yaml",
         params=f"{LOOP_DIR}/fitted_params.yaml",

@@ -12,7 +12,7 @@ rule vessel_maps:
     input:
         unpack(maps_inputs),
     output:
-        table="results/maps/table4_maps.csv",
+        table=report("results/maps/table4_maps.csv", caption="../report/table4_maps.rst", category="Vessel maps"),
         md="results/maps/table4_maps.md",
         photo="results/maps/table4_maps_photo.csv",
         json="results/maps/vessel_maps.json",

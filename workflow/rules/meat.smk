@@ -35,7 +35,7 @@ rule data_summary:
         meat=rules.meat_set.output.npz,
         conf=conf_files("data_summary"),
     output:
-        csv="results/data/summary.csv",
+        csv=report("results/data/summary.csv", caption="../report/data_summary.rst", category="Real data"),
         md="results/data/summary.md",
     params:
         rule="data_summary",

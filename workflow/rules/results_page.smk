@@ -7,21 +7,21 @@
 
 rule results_page:
     input:
-        data=rules.data_summary.output.csv,
-        calibration=rules.calibrate.output.csv,
-        loop=rules.loop.output.csv,
+        data=plain(rules.data_summary.output.csv),
+        calibration=plain(rules.calibrate.output.csv),
+        loop=plain(rules.loop.output.csv),
         loop_report=rules.loop.output.report,
-        train_report=rules.train_report.output,  # seed sweep, Table 4 upper half, Fig. 6 (+ Table 3 if ablated)
-        maps=rules.vessel_maps.output.table,
+        train_report=plain(rules.train_report.output),  # seed sweep, Table 4 upper half, Fig. 6 (+ Table 3 if ablated)
+        maps=plain(rules.vessel_maps.output.table),
         maps_photo=rules.vessel_maps.output.photo,
         maps_json=rules.vessel_maps.output.json,
-        render=rules.render_twin.output.png,  # listed among the figures
+        render=plain(rules.render_twin.output.png),  # listed among the figures
         twin_ablation=TWIN_ABLATION_FILES,  # common.smk; empty where the profile skips the ablation
         conf=conf_files("results_page"),
         explanations="conf/results_page/explanations.yaml",
         folders="conf/results_page/folders.yaml",
     output:
-        page="results/README.md",
+        page=report("results/README.md", caption="../report/results_page.rst", category="Results page"),
     log:
         "results/logs/results_page.log",
     params:

@@ -5,13 +5,15 @@
 # (train_inputs, train_overrides, sweep_runs, ...) are in common.smk.
 # Run folders: results/train/<exp>/L<clip_len>/seed<seed>/ (palpation.report.runs.run_dir).
 
-_CAPTIONS = {"fig6_pr_curves.png": "fig6_pr_curves.rst", "seed_sweep.csv": "seed_sweep.rst"}
+_CAPTIONS = {"fig6_pr_curves.png": "fig6_pr_curves.rst", "seed_sweep.csv": "seed_sweep.rst",
+             "table4_markers.csv": "table4_markers.rst"}
 TRAIN_REPORT_FILES = [
     (report(f"{TRAIN_REPORT}/{name}", caption=f"../report/{_CAPTIONS[name]}", category="ST-GNN")
      if name in _CAPTIONS else f"{TRAIN_REPORT}/{name}")
     for name in ("seed_sweep.csv", "seed_sweep.md", "table4_markers.csv", "table4_markers.md",
                  "fig6_pr_curves.png", "fig6_pr_curves.pdf", "bench_train.json")
-] + ([f"{TRAIN_REPORT}/clip_len_ablation.csv", f"{TRAIN_REPORT}/table3_clip_len.md"]
+] + ([report(f"{TRAIN_REPORT}/clip_len_ablation.csv", caption="../report/table3_clip_len.rst", category="ST-GNN"),
+      f"{TRAIN_REPORT}/table3_clip_len.md"]
      if TRAIN["ablation"]["clip_lens"] else [])
 
 

@@ -61,6 +61,15 @@ def photo_images(mset, photos_dir, targets) -> dict | None:
     return {k: load_gray(p) for k, p in paths.items() if p.exists()} or None
 
 
+def _unit(name: str) -> str:
+    """' <unit>' of a fitted parameter from the registry ('' when dimensionless or unknown)."""
+    from palpation.twin.parameters import ALIASES, PARAMETERS
+
+    entry = PARAMETERS.get(name) or ALIASES.get(name)
+    unit = "" if entry is None else entry.unit.split(" (")[0]
+    return "" if unit in ("", "1") else f" {unit}"
+
+
 def draw_figures(out: Path, cal: CalibrationConfig, rows: list[dict], val, targets, images, fitted: dict,
                  resolution: str) -> None:
     """The search history and Fig. 4 for our fit and for the paper's adopted parameters."""
@@ -73,7 +82,7 @@ def draw_figures(out: Path, cal: CalibrationConfig, rows: list[dict], val, targe
     real = {t.kind: t.markers for t in targets}
     mean = val.summary["mean"]
     for stem, sim, column, title in (
-            ("fig4", val.fitted_markers, "fitted_px", ", ".join(f"{k} = {v:.4g}" for k, v in fitted.items())),
+            ("fig4", val.fitted_markers, "fitted_px", ", ".join(f"{k} = {v:.4g}{_unit(k)}" for k, v in fitted.items())),
             ("fig4_paper", val.paper_markers, "paper_params_px",
              f"paper parameters: E = {cal.paper.E:.4g} Pa, k_n = {cal.paper.k_n_ref:.4g} reference units")):
         mae = {r["interaction"]: r[column] for r in val.rows}
@@ -95,7 +104,7 @@ def run(cfg: DictConfig) -> dict:
         from palpation.tracking import log_artifact, log_metrics, start_run
 
         tracked = start_run("calibrate", params=OmegaConf.to_container(cfg, resolve=True),
-                            run_name=study_key(cal, twin, mesh.resolution))
+                            config=study_key(cal, twin, mesh.resolution))
 
     def log_trial(trial, result):
         metrics = {"trial/value": result.value, "trial/diverged": float(result.diverged),

@@ -46,7 +46,7 @@ def _tracked(cfg: DictConfig, run_name: str):
     if not cfg.track:
         return contextlib.nullcontext()
     from palpation.tracking import start_run
-    return start_run("loop", params=OmegaConf.to_container(cfg, resolve=True), run_name=run_name)
+    return start_run("loop", params=OmegaConf.to_container(cfg, resolve=True), config=run_name)
 
 
 def _log(metrics: dict, step: int | None = None, track: bool = True) -> None:

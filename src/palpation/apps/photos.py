@@ -17,6 +17,7 @@ from omegaconf import DictConfig, OmegaConf
 from palpation.config_check import app_main
 from palpation.io import save_json, save_text
 from palpation.markers.detect import RatioDetector
+from palpation.markers.manifest import read_manifest
 from palpation.markers.photoset import list_photos, measure_photos, reference_pipeline_baselines
 from palpation.markers.template import template_from_photo
 from palpation.measured import save_measured_set
@@ -42,16 +43,20 @@ CALIBRATION_TARGETS = ("press_d4", "twist_z_d4_a90", "twist_x_d2_a20", "slide_d3
 def run(cfg: DictConfig) -> dict:
     params = RatioDetector(**OmegaConf.to_container(cfg.detector, resolve=True))
     photos_dir = Path(cfg.photos_dir)
+    manifest = cfg.get("photos_manifest")
+    # any photo set with a manifest (file, kind, depth, angle); else the paper's file names
+    photos = read_manifest(manifest, photos_dir) if manifest else list_photos(photos_dir)
     template = template_from_photo(photos_dir / cfg.template_photo, params)
-    photos = list_photos(photos_dir)
-    mset, rows = measure_photos(photos, template, cfg.rest_photo, params, blob_counts=cfg.blob_counts)
-    # the reference's own pipeline (blob detectors + its hand-placed markers), as a check
-    replica = reference_pipeline_baselines(photos, cfg.rest_photo) if cfg.blob_counts else {}
+    mset, rows = measure_photos(photos, template, cfg.rest_photo, params, blob_counts=cfg.blob_counts,
+                                max_missing=int(cfg.get("max_missing", 0)))
+    # the reference's own pipeline (blob detectors + its hand-placed markers), as a check on its photos
+    replica = reference_pipeline_baselines(photos, cfg.rest_photo) if cfg.blob_counts and not manifest else {}
     mset.meta.update(
         camera={"model": "equidistant fisheye", "f_px": 380.0, "cx_px": 1040.0, "cy_px": 584.0,
                 "image_size_px": [1920, 1080], "circle_radius_px": 380.0},
         detector={"kind": "ratio", **params.__dict__},
-        template_source=cfg.template_photo, rest_source=cfg.rest_photo, photos_dir=str(photos_dir))
+        template_source=cfg.template_photo, rest_source=cfg.rest_photo, photos_dir=str(photos_dir),
+        photos_manifest=str(manifest) if manifest else None)
     for row in rows:
         row.update({f"spec_{k}": v for k, v in SPEC_VALUES.get(row["name"], {}).items()})
         row.update({f"refpipe_{k}": v for k, v in replica.get(row["name"], {}).items()})

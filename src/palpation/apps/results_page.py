@@ -41,6 +41,12 @@ def run(cfg: DictConfig) -> dict:
     write_page(out, text)
     present = {k: v is not None for k, v in secs.items()}
     log.info("results page %s from %s: %s", out, c["root"], present)
+    if c["track"]:
+        from palpation import tracking
+
+        with tracking.start_run("results_page", {k: c[k] for k in ("root", "out", "profile", "noise_k")}):
+            tracking.log_metrics({"sections_present": sum(present.values())})
+            tracking.log_artifact(out)
     return {"out": str(out), "sections": present}
 
 

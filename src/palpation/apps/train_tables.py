@@ -63,7 +63,22 @@ def run(cfg: DictConfig) -> dict:
     save_json(out / "bench_train.json", {"profile": profile, "runs": [
         {k: r[k] for k in ("config", "clip_len", "seed", "train_seconds", "device")} for r in runs]})
     log.info("report from %s into %s: %s", c["runs_root"], out, outputs)
+    if c["track"]:
+        _track(c, out, sweep)
     return outputs
+
+
+def _track(c: dict, out: Path, sweep) -> None:
+    """One MLflow run of the tables: the per-config means as metrics, tables and Fig. 6 as artefacts."""
+    from palpation import tracking
+
+    with tracking.start_run("train_tables", {k: c[k] for k in ("runs_root", "experiments", "seeds", "clip_len")}):
+        means = sweep.groupby("config")[["auroc", "ap"]].mean()
+        tracking.log_metrics({f"{config}/{k}": v for config, row in means.iterrows() for k, v in row.items()})
+        for name in ("seed_sweep.csv", "table4_markers.csv", "clip_len_ablation.csv", "bench_train.json"):
+            if (out / name).exists():
+                tracking.log_artifact(out / name, "tables")
+        tracking.log_figure(out / "fig6_pr_curves")
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="train_tables")

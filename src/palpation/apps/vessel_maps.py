@@ -152,8 +152,7 @@ def run(cfg: DictConfig) -> dict:
     save_csv(photo, out / "table4_maps_photo.csv")
     notes = _notes(c, layout, evidence)
     save_text(out / "table4_maps.md", table4_maps_markdown(table, c["profile"], notes, photo))
-    figures.fig7(panels, out / "fig7_confusion_maps", f"Vessel maps ({c['profile']} profile): TP green, FP blue, "
-                 "FN red, TN black")
+    figures.fig7(panels, out / "fig7_confusion_maps", f"Vessel maps ({c['profile']} profile)")
     figures.threshold_figure(curves, out / "fig7_threshold_selection")
     save_json(out / "vessel_maps.json", {"profile": c["profile"], "configs": summary,
                                          "silicone_layout": dataclasses.asdict(layout) if layout else None})
@@ -179,13 +178,15 @@ def _notes(c: dict, layout: SweepLayout | None, evidence: dict | None) -> list[s
 
 def _track(c: dict, table: pd.DataFrame, out: Path) -> None:
     params = {k: c[k] for k in ("profile", "clip_len", "configs", "sim", "silicone_layout", "threshold")}
-    with tracking.start_run("vessel_maps", params, run_name=f"vessel_maps-{c['profile']}"):
+    with tracking.start_run("vessel_maps", params, config=c['profile']):
         for row in table.to_dict("records"):
             tracking.log_metrics({f"{row['config']}/{k}": row[k] for k in ("threshold", "mcc", "f1", "precision",
                                                                              "recall", "ap", "d_bar_mm")
                                   if row[k] == row[k]})
-        for name in ("table4_maps.csv", "table4_maps.md", "vessel_maps.json", "fig7_confusion_maps.png"):
+        for name in ("table4_maps.csv", "table4_maps.md", "vessel_maps.json"):
             tracking.log_artifact(out / name)
+        for stem in ("fig7_confusion_maps", "fig7_threshold_selection"):
+            tracking.log_figure(out / stem)
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="vessel_maps")

@@ -19,8 +19,11 @@ import numpy as np  # noqa: E402
 from palpation.io import atomic_path, save_figure  # noqa: E402
 
 COLOURS = {"tp": (0, 200, 0), "fp": (40, 90, 255), "fn": (230, 0, 0), "tn": (0, 0, 0)}
+LABELS = {"tp": "TP: vessel found", "fp": "FP: false alarm", "fn": "FN: vessel missed", "tn": "TN / not visited"}
 GAP_RGB = (128, 128, 128)
 BIG = 5
+MM_PER_PX = 1.0  # the top-view grids' resolution (mapping/grid.py)
+SCALE_BAR_MM = 20
 
 
 def confusion_rgb(pred: np.ndarray, truth: np.ndarray) -> np.ndarray:
@@ -61,10 +64,25 @@ def save_rgb(image: np.ndarray, path: str | os.PathLike, scale: int = 1) -> Path
 
 
 def draw_confusion(ax, image: np.ndarray, title: str) -> None:
-    ax.imshow(image, interpolation="nearest")
+    """A confusion mosaic with axes in mm (1 px = 1 mm) and a scale bar."""
+    from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
+
+    h, w = image.shape[:2]
+    ax.imshow(image, interpolation="nearest", extent=(0, w * MM_PER_PX, h * MM_PER_PX, 0))
     ax.set_title(title, fontsize=9)
-    ax.set_xticks([])
-    ax.set_yticks([])
+    ax.set_xlabel("mm (maps tiled left to right, 2 mm grey gaps)", fontsize=7)
+    ax.set_ylabel("mm", fontsize=7)
+    ax.tick_params(labelsize=6)
+    ax.add_artist(AnchoredSizeBar(ax.transData, SCALE_BAR_MM, f"{SCALE_BAR_MM} mm", "lower right", pad=0.3,
+                                  color="white", frameon=False, size_vertical=1, fontproperties={"size": 7}))
+
+
+def confusion_legend(fig) -> None:
+    """The colour key as a legend (not title text)."""
+    from matplotlib.patches import Patch
+
+    handles = [Patch(facecolor=np.array(COLOURS[k]) / 255, edgecolor="0.5", label=LABELS[k]) for k in COLOURS]
+    fig.legend(handles=handles, loc="lower center", ncol=4, fontsize=8, frameon=False)
 
 
 def draw_threshold(ax, curve: dict, op, title: str) -> None:
@@ -73,23 +91,26 @@ def draw_threshold(ax, curve: dict, op, title: str) -> None:
     ax.plot(t, curve["precision"], color="tab:blue", lw=1.2, label="precision (3 mm)")
     ax.plot(t, curve["recall"], color="tab:orange", lw=1.2, label="recall (3 mm)")
     ax.plot(t, curve["f1"], color="tab:gray", lw=0.8, ls=":", label="F1 (3 mm)")
-    ax.axhline(op.min_precision, color="tab:blue", lw=0.6, ls="--")
+    ax.axhline(op.min_precision, color="tab:blue", lw=0.6, ls="--",
+               label=f"required precision ({op.min_precision:g})")
     ax.axvline(op.threshold, color="k", lw=0.8)
     ax.plot([op.threshold], [op.precision], "o", color="tab:blue", ms=4)
     ax.plot([op.threshold], [op.recall], "o", color="tab:orange", ms=4)
     ax.set_xlim(0, 1)
     ax.set_ylim(0, 1.02)
-    ax.set_xlabel("threshold")
+    ax.set_xlabel("score threshold")
+    ax.set_ylabel("precision, recall, F1 (3 mm tolerance)", fontsize=8)
     ax.set_title(f"{title}: thr {op.threshold:.4f} ({op.rule})", fontsize=9)
 
 
 def fig7(panels: list[tuple[str, np.ndarray]], stem: str | os.PathLike, suptitle: str = "") -> list[Path]:
     """Confusion mosaics of every configuration, one row each; PNG + PDF."""
-    fig, axes = plt.subplots(len(panels), 1, figsize=(8, 2.6 * len(panels)), squeeze=False)
+    fig, axes = plt.subplots(len(panels), 1, figsize=(8, 2.8 * len(panels) + 0.4), squeeze=False)
     for ax, (title, image) in zip(axes[:, 0], panels):
         draw_confusion(ax, image, title)
-    fig.suptitle(suptitle or "Vessel maps: TP green, FP blue, FN red, TN black", fontsize=10)
-    fig.tight_layout()
+    fig.suptitle(suptitle or "Vessel maps", fontsize=10)
+    confusion_legend(fig)
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
     out = save_figure(fig, stem)
     plt.close(fig)
     return out

@@ -48,6 +48,12 @@ class RatioDetector:
     rescue: bool = True
     rescue_aspect_max: float = 3.0
     rescue_fill_min: float = 0.3
+    # A specular glint (saturated, >= glint_min) across a marker splits it in two and drags the
+    # centroid ~6 px. Glint pixels that a closing of glint_close_px bridges between dark pixels are
+    # given back to the marker, with the mean weight of its dark pixels. Photos without saturated
+    # pixels next to markers (all shipped ones) come out unchanged.
+    glint_min: float = 250.0
+    glint_close_px: int = 15
 
     def scaled(self, factor: float, offset_px: tuple[float, float] = (0.0, 0.0)) -> "RatioDetector":
         """The same detector for an image resized by `factor` then shifted by `offset_px`."""
@@ -56,6 +62,7 @@ class RatioDetector:
             self,
             background_px=odd(self.background_px * factor),
             opening_px=odd(self.opening_px * factor) if self.opening_px > 1 else 1,
+            glint_close_px=odd(self.glint_close_px * factor),
             area_min_px2=self.area_min_px2 * factor ** 2,
             area_max_px2=self.area_max_px2 * factor ** 2,
             circle_centre_px=(self.circle_centre_px[0] * factor + offset_px[0],
@@ -141,6 +148,8 @@ def ratio_components(gray: np.ndarray, p: RatioDetector) -> tuple[np.ndarray, np
     mask = ((ratio < p.ratio_max) & (background > p.background_min) & in_circle).astype(np.uint8)
     if p.opening_px > 1:
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((p.opening_px, p.opening_px), np.uint8))
+    glint = _glint_fill(gray, mask, p)
+    mask |= glint
     n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     _, _, bw, bh, area = stats[1:].T
     aspect = np.maximum(bw, bh) / np.maximum(np.minimum(bw, bh), 1)
@@ -152,12 +161,51 @@ def ratio_components(gray: np.ndarray, p: RatioDetector) -> tuple[np.ndarray, np
     weight = np.clip(1.0 - ratio, 0.0, None).ravel()
     lab = labels.ravel()
     on = lab > 0
+    if glint.any():  # a glint pixel weighs as much as the mean dark pixel of its marker
+        added = glint.ravel().astype(bool)
+        dark = on & ~added
+        mean_dark = (np.bincount(lab[dark], weights=weight[dark], minlength=n)
+                     / np.maximum(np.bincount(lab[dark], minlength=n), 1))
+        weight = weight.copy()
+        weight[added] = mean_dark[lab[added]]
     wsum = np.bincount(lab[on], weights=weight[on], minlength=n)
     wx = np.bincount(lab[on], weights=(weight * xx.ravel())[on], minlength=n)
     wy = np.bincount(lab[on], weights=(weight * yy.ravel())[on], minlength=n)
     idx = np.flatnonzero(relaxed) + 1
     centroids = np.stack([wx[idx] / wsum[idx], wy[idx] / wsum[idx]], axis=1)
     return centroids, strict[relaxed]
+
+
+def _glint_fill(gray: np.ndarray, mask: np.ndarray, p: RatioDetector) -> np.ndarray:
+    """uint8 mask of the glint pixels that lie inside a marker (bridged by a closing of its dark pixels)."""
+    bright = (gray >= p.glint_min).astype(np.uint8)
+    if not bright.any():
+        return np.zeros_like(mask)
+    bright = cv2.dilate(bright, np.ones((5, 5), np.uint8))  # the glint's soft rim is neither dark nor bright
+    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (p.glint_close_px, p.glint_close_px))
+    closed = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, k)
+    fill = closed & bright & (1 - mask)
+    # A glint across a marker's edge bites a notch that no closing fills: fit a circle to the
+    # marker's own edge (its boundary away from the glint) and give it the glint pixels inside.
+    whole = mask | fill
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(whole, connectivity=8)
+    touched = np.unique(labels[(bright > 0) & (labels > 0)])
+    edge = whole & (1 - cv2.erode(whole, np.ones((3, 3), np.uint8))) & (1 - cv2.dilate(bright, np.ones((3, 3))))
+    for i in touched[stats[touched, cv2.CC_STAT_AREA] <= p.area_max_px2]:
+        ys, xs = np.nonzero((labels == i) & (edge > 0))
+        if len(xs) < 8:
+            continue
+        # algebraic (Kasa) circle fit: x^2 + y^2 + D x + E y + F = 0
+        D, E, F = np.linalg.lstsq(np.stack([xs, ys, np.ones_like(xs)], 1).astype(float),
+                                  -(xs ** 2 + ys ** 2).astype(float), rcond=None)[0]
+        cx, cy = -D / 2, -E / 2
+        r = np.sqrt(max(cx * cx + cy * cy - F, 0.0))
+        if not r < 0.5 * np.sqrt(p.area_max_px2):  # not a marker-sized disc: leave it to the filters
+            continue
+        disc = np.zeros_like(mask)
+        cv2.circle(disc, (int(round(cx)), int(round(cy))), int(round(r)), 1, -1)
+        fill |= disc & bright & (1 - mask)
+    return fill
 
 
 def ratio_candidates(gray: np.ndarray, p: RatioDetector) -> np.ndarray:

@@ -65,17 +65,17 @@ def _similarity_icp(tpl, pts, tree, matrix, stages, gate_px, iterations):
     return matrix
 
 
-def _poly_features(xy: np.ndarray) -> np.ndarray:
-    """Monomials up to degree 3: the cubic terms carry the fisheye's radial compression."""
+def _poly_features(xy: np.ndarray, degree: int = 3) -> np.ndarray:
+    """Monomials up to `degree` (1, 2 or 3): the cubic terms carry the fisheye's radial compression."""
     u, v = xy[:, 0], xy[:, 1]
-    return np.stack([np.ones_like(u), u, v, u * u, u * v, v * v, u ** 3, u * u * v, u * v * v, v ** 3],
-                    axis=1)
+    terms = [np.ones_like(u), u, v, u * u, u * v, v * v, u ** 3, u * u * v, u * v * v, v ** 3]
+    return np.stack(terms[:{1: 3, 2: 6, 3: 10}[degree]], axis=1)
 
 
-def _polynomial_icp(tpl, pts, tree, warped, stages, gate_px, iterations, tpl_spacing):
+def _polynomial_icp(tpl, pts, tree, warped, stages, gate_px, iterations, tpl_spacing, degree=3):
     # O(1) coordinates keep the least squares well posed
-    features = _poly_features((tpl - np.median(tpl, 0)) / (10 * tpl_spacing))
-    for use in stages[1:]:
+    features = _poly_features((tpl - np.median(tpl, 0)) / (10 * tpl_spacing), degree)
+    for use in (stages if degree < 3 else stages[1:]):
         for _ in range(iterations):
             i, j = _mutual_pairs(warped[use], pts, tree, gate_px)
             if len(i) < 2 * features.shape[1]:
@@ -105,13 +105,15 @@ def _starts(tpl: np.ndarray, pts: np.ndarray, rotation_deg: float) -> list[np.nd
 
 
 def warp_template(template: np.ndarray, points: np.ndarray, polynomial: bool = True,
-                  rotation_deg: float = 0.0, iterations: int = 20, gate: float = 0.4) -> np.ndarray:
+                  rotation_deg: float = 0.0, iterations: int = 20, gate: float = 0.4,
+                  max_unmatched: int = 3) -> np.ndarray:
     """Template positions (M, 2) predicted in the frame of the unordered `points`.
 
     From each start (`_starts`), a coarse-to-fine trimmed ICP fits a similarity and then, if
     `polynomial`, a third-order polynomial map, on mutual nearest neighbours within `gate` x spacing.
     Outliers (rim glare, missing markers) have no mutual partner and do not pull the fit. The start
-    whose result leaves the lowest truncated residual wins.
+    whose result leaves the lowest truncated residual wins. If more than `max_unmatched` template
+    markers are left without a detection within the gate, degree-stepped fits are tried as well.
     """
     tpl = np.asarray(template, float)
     pts = np.asarray(points, float)
@@ -129,8 +131,21 @@ def warp_template(template: np.ndarray, points: np.ndarray, polynomial: bool = T
         # many starts converge to the same fit: refine each distinct one only once
         if all(np.abs(warped - f).max() > 0.1 * gate_px for f in fits):
             fits.append(warped)
-    if polynomial and len(pts) >= 20:
-        fits = [_polynomial_icp(tpl, pts, tree, w, stages, gate_px, iterations, tpl_spacing) for w in fits]
+    if not (polynomial and len(pts) >= 20):
+        return min(fits, key=cost)
+    similar = fits
+    fits = [_polynomial_icp(tpl, pts, tree, w, stages, gate_px, iterations, tpl_spacing) for w in similar]
+    best = min(fits, key=cost)
+    if np.sum(tree.query(best)[0] > gate_px) <= max_unmatched:
+        return best
+    # A cubic fitted straight onto a similarity can settle one lattice row off when a shear or tilt
+    # (camera off-axis) adds to a strong deformation, dropping a whole outer edge. Raising the degree
+    # step by step (affine, quadratic, cubic), each over the growing stages, follows the deformation
+    # out from the centre; the lowest truncated residual of all fits still decides.
+    for w in similar:
+        for degree in (1, 2, 3):
+            w = _polynomial_icp(tpl, pts, tree, w, stages, gate_px, iterations, tpl_spacing, degree)
+        fits.append(w)
     return min(fits, key=cost)
 
 

@@ -1,12 +1,16 @@
 """Detect and order a folder of flat-tip photos into a measured set, with per-photo statistics.
 
-Every photo must give exactly 127 markers; the markers are put into the template's base-graph order
-by the pre-aligned Hungarian, and displacements are taken against the rest photo (press depth 0,
-SPEC §6.1/§17). The statistics are the ones SPEC §13.2 and §15.8 quote, so the two can be compared.
+The markers are put into the template's base-graph order by the pre-aligned Hungarian, and
+displacements are taken against the rest photo (press depth 0, SPEC §6.1/§17). A photo may miss up to
+`max_missing` markers (painted over, out of focus): those are filled from the warped template plus
+their found neighbours' displacement and flagged False in `found`, never given a neighbour's label.
+The statistics are the ones SPEC §13.2 and §15.8 quote, so the two can be compared. Photos come with
+their states from the paper's file names or from a manifest (`markers.manifest`).
 """
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 from typing import Any
@@ -14,11 +18,12 @@ from typing import Any
 import numpy as np
 
 from palpation.markers.detect import BlobDetector, RatioDetector, check_covers_circle, detect_markers, load_gray
-from palpation.markers.lattice import base_graph_order, median_spacing_px
-from palpation.markers.order import order_to_template
+from palpation.markers.lattice import N_MARKERS, base_graph_order, median_spacing_px, neighbours
+from palpation.markers.order import order_to_template, warp_template
 from palpation.markers.template import require_full_set
 from palpation.measured import MeasuredSet, MeasuredState, make_measured_set, parse_photo_name
 
+log = logging.getLogger(__name__)
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png"}
 _TRAJECTORY_RANK = {"rest": 0, "press": 1, "twist_z": 2, "twist_x": 3, "slide": 4}
 
@@ -47,37 +52,51 @@ def list_photos(directory: str | os.PathLike) -> list[Path]:
     return sorted(photos, key=key)
 
 
-def order_photo(path: Path, template: np.ndarray, params: RatioDetector) -> tuple[np.ndarray, int]:
-    """127 markers of one photo in template order, and the raw candidate count before pruning."""
+def order_photo(path: Path, template: np.ndarray, params: RatioDetector, max_missing: int = 0
+                ) -> tuple[np.ndarray, np.ndarray, int]:
+    """127 markers of one photo in template order, found mask (False = filled), raw candidate count."""
     gray = load_gray(path)
     check_covers_circle(gray, params, path)
     raw = detect_markers(gray, RatioDetector(**{**params.__dict__, "prune": False}))
-    points = require_full_set(detect_markers(gray, params, reference=template), path)
+    points = detect_markers(gray, params, reference=template)
+    if not N_MARKERS - max_missing <= len(points) <= N_MARKERS:
+        require_full_set(points, path)  # raises, naming the photo
     ordered, found = order_to_template(points, template)
-    if not found.all():  # cannot happen with 127 points and 127 slots, kept as a guard
-        raise ValueError(f"{path}: only {found.sum()} of 127 markers could be ordered")
-    return ordered, len(raw)
+    if not found.all():
+        from palpation.markers.track import fill_missing
+
+        predicted = warp_template(template, points)
+        ordered = fill_missing(predicted, ordered, found, neighbours(predicted))
+        log.warning("%s: markers %s not detected, filled from their neighbours (found=False)",
+                    path.name, np.flatnonzero(~found).tolist())
+    return ordered, found, len(raw)
 
 
-def measure_photos(photos: list[Path], template: np.ndarray, rest_photo: str,
-                   params: RatioDetector = RatioDetector(), blob_counts: bool = True
+def measure_photos(photos: list, template: np.ndarray, rest_photo: str,
+                   params: RatioDetector = RatioDetector(), blob_counts: bool = True, max_missing: int = 0
                    ) -> tuple[MeasuredSet, list[dict[str, Any]]]:
-    """Measured set of `photos` (displacement vs the photo named `rest_photo`) and per-photo stats."""
-    names = [p.name for p in photos]
+    """Measured set of `photos` (displacement vs the photo named `rest_photo`) and per-photo stats.
+
+    `photos`: paths with the paper's names, or `manifest.PhotoInfo` from a manifest.
+    """
+    from palpation.markers.manifest import PhotoInfo, paper_names
+
+    infos = [p if isinstance(p, PhotoInfo) else paper_names([Path(p)])[0] for p in photos]
+    names = [i.path.name for i in infos]
     if rest_photo not in names:
         raise ValueError(f"rest_photo '{rest_photo}' is not among the photos {names}")
-    ordered, raw_counts = zip(*(order_photo(p, template, params) for p in photos))
-    markers = np.stack(ordered)
+    ordered, found, raw_counts = zip(*(order_photo(i.path, template, params, max_missing) for i in infos))
+    markers, found = np.stack(ordered), np.stack(found)
     rest = markers[names.index(rest_photo)]
-    states = [MeasuredState(name=state_name(p), source_file=p.name, **parse_photo_name(p))
-              for p in photos]
-    mset = make_measured_set(markers, np.ones(markers.shape[:2], bool), rest, states,
-                             rest_source=rest_photo)
+    states = [MeasuredState(name=i.name, source_file=i.path.name, trajectory=i.trajectory,
+                            depth_mm=i.depth_mm, angle_deg=i.angle_deg) for i in infos]
+    mset = make_measured_set(markers, found, rest, states, rest_source=rest_photo)
     rows = []
-    for p, state, m, n_raw in zip(photos, states, markers, raw_counts):
+    for info, state, m, ok, n_raw in zip(infos, states, markers, found, raw_counts):
+        p = info.path
         disp = np.linalg.norm(m - rest, axis=1)
         row = {"name": state.name, "source_file": p.name, "trajectory": state.trajectory,
-               "n_candidates": n_raw, "n_markers": len(m),
+               "n_candidates": n_raw, "n_markers": int(ok.sum()), "n_filled": int((~ok).sum()),
                "median_nn_spacing_px": median_spacing_px(m),
                "disp_median_px": float(np.median(disp)), "disp_max_px": float(disp.max()),
                # undeformed-sensor baselines (SPEC §15.8): mean marker error of a model that predicts

@@ -5,10 +5,11 @@ Predictions are positive when prob >= threshold (quirk 25: the reference mixes >
 
 from __future__ import annotations
 
-import math
+import warnings
 
 import numpy as np
-from sklearn.metrics import average_precision_score, roc_auc_score
+from sklearn.metrics import (average_precision_score, confusion_matrix, f1_score, jaccard_score,
+                             matthews_corrcoef, precision_score, recall_score, roc_auc_score)
 
 
 def _check(probs, labels) -> tuple[np.ndarray, np.ndarray]:
@@ -22,19 +23,20 @@ def _check(probs, labels) -> tuple[np.ndarray, np.ndarray]:
 
 def confusion(probs, labels, threshold: float = 0.5) -> dict:
     probs, labels = _check(probs, labels)
-    pred = probs >= threshold
-    return {"tp": int(np.sum(pred & labels)), "fp": int(np.sum(pred & ~labels)),
-            "fn": int(np.sum(~pred & labels)), "tn": int(np.sum(~pred & ~labels))}
+    tn, fp, fn, tp = confusion_matrix(labels, probs >= threshold, labels=[False, True]).ravel()
+    return {"tp": int(tp), "fp": int(fp), "fn": int(fn), "tn": int(tn)}
 
 
 def iou(pred: np.ndarray, truth: np.ndarray) -> float:
     """Intersection over union of two boolean masks; an empty union counts as 1."""
-    union = np.sum(pred | truth)
-    return 1.0 if union == 0 else float(np.sum(pred & truth) / union)
+    return float(jaccard_score(np.ravel(truth), np.ravel(pred), zero_division=1.0))
 
 
-def _ratio(num: float, den: float) -> float:
-    return float(num / den) if den else 0.0
+def _mcc(labels: np.ndarray, pred: np.ndarray) -> float:
+    """sklearn's MCC (0 for a zero denominator); quiet when one class is absent, which is expected here."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "A single label was found", UserWarning)
+        return float(matthews_corrcoef(labels, pred))
 
 
 def marker_metrics(probs, labels, threshold: float = 0.5) -> dict:
@@ -42,9 +44,6 @@ def marker_metrics(probs, labels, threshold: float = 0.5) -> dict:
     AP and AUROC (sklearn; NaN when only one class is present), chance (positive rate), lift = AP/chance."""
     probs, labels = _check(probs, labels)
     c = confusion(probs, labels, threshold)
-    tp, fp, fn, tn = c["tp"], c["fp"], c["fn"], c["tn"]
-    den = math.sqrt(float(tp + fp) * (tp + fn) * (tn + fp) * (tn + fn))
-    precision, recall = _ratio(tp, tp + fp), _ratio(tp, tp + fn)
     pred = probs >= threshold
     two_classes = 0 < labels.sum() < labels.size
     ap = float(average_precision_score(labels, probs)) if two_classes else float("nan")
@@ -52,10 +51,10 @@ def marker_metrics(probs, labels, threshold: float = 0.5) -> dict:
     chance = float(labels.mean())
     return {
         **c,
-        "mcc": _ratio(tp * tn - fp * fn, den),
-        "f1": _ratio(2 * tp, 2 * tp + fp + fn),
-        "precision": precision,
-        "recall": recall,
+        "mcc": _mcc(labels, pred),
+        "f1": float(f1_score(labels, pred, zero_division=0.0)),
+        "precision": float(precision_score(labels, pred, zero_division=0.0)),
+        "recall": float(recall_score(labels, pred, zero_division=0.0)),
         "fg_iou": iou(pred, labels),
         "bg_iou": iou(~pred, ~labels),
         "ap": ap,

@@ -70,8 +70,8 @@ def run_job(job: TrainJob, out_dir: str | Path, params: dict | None = None, trac
              job.clip_len, len(train), len(val), len(test))
     run_tags = {"config": job.config_name, "seed": str(job.seed), "clip_len": str(job.clip_len),
                 "model": job.model.name, "device": job.train.device, **(tags or {})}
-    run_name = f"{job.config_name}-L{job.clip_len}-seed{job.seed}"
-    ctx = tracking.start_run("train", params or asdict(job), run_name, run_tags) if track else nullcontext()
+    ctx = (tracking.start_run("train", params or asdict(job), f"{job.config_name}/L{job.clip_len}", run_tags,
+                              seed=job.seed) if track else nullcontext())
     with ctx:
         result = fit(train, val, rest, topo, job.model, job.train, job.seed,
                      tracking.log_metrics if track else None, progress=progress)

@@ -55,6 +55,9 @@ class SiliconeParams:
     dot_cover_px: float = 10.5  # drawn dot incl. its 1 px black rim (r ~9.5): hidden from the fit
     near_dot_px: float = 20.0  # blobs this close to a dot may be clipped: re-fit them instead
     marker_area_max_px2: float = 400.0
+    # > 255 turns the detector's glint repair off: the published Silicone set (built before it) stays
+    # bit-identical; 250 would move 10 of its 20,320 marker positions by <= 0.17 px
+    glint_min: float = 256.0
     max_step_orig_px: float = 15.0  # temporal gate: 3x the p99 step, < the rim-glare offset
     patch_half_px: int = 12
     search_px: int = 7  # masked-fit search radius around the tracked prediction
@@ -103,7 +106,7 @@ def video_detector(p: SiliconeParams = SiliconeParams(), origin=(0.0, 0.0)) -> R
     image whose top-left pixel sits at video px `origin`."""
     offset = (IMAGE_BOX[0] - float(origin[0]), IMAGE_BOX[1] - float(origin[1]))
     base = RatioDetector().scaled(VIDEO_SCALE, offset)
-    return dataclasses.replace(base, area_max_px2=p.marker_area_max_px2, prune=False)
+    return dataclasses.replace(base, area_max_px2=p.marker_area_max_px2, prune=False, glint_min=p.glint_min)
 
 
 @dataclass(frozen=True)

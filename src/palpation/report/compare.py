@@ -96,6 +96,7 @@ class Comparison:
     diff: float
     sigma: float  # sqrt(std_ours² + std_paper²); NaN if either is unknown
     k: float = 2.0  # "within seed noise" means |diff| <= k·sigma
+    too_few: str = ""  # why no verdict is given (too few seeds, no spread); empty when one is
 
     @property
     def z(self) -> float:
@@ -104,11 +105,13 @@ class Comparison:
     @property
     def within(self) -> bool | None:
         """None where no noise scale exists (one seed, or a single instance)."""
-        if math.isnan(self.sigma):
+        if math.isnan(self.sigma) or self.too_few:
             return None
         return abs(self.diff) <= self.k * self.sigma
 
     def verdict(self) -> str:
+        if self.too_few:
+            return self.too_few
         if self.within is None:
             return "no seed spread to judge by"
         side = "higher" if self.diff > 0 else "lower"
@@ -119,9 +122,20 @@ class Comparison:
         return f"**{self.z:.1f}σ {side}**"
 
 
-def compare(ours: float, ours_std: float, paper: float, paper_std: float, k: float = 2.0) -> Comparison:
+MIN_SEEDS = 3  # a seed verdict needs at least this many seeds of ours and a non-zero spread
+
+
+def compare(ours: float, ours_std: float, paper: float, paper_std: float, k: float = 2.0,
+            n_ours: int | None = None) -> Comparison:
+    """`n_ours`: our seeds behind `ours_std`; with fewer than MIN_SEEDS or a zero spread no verdict is given
+    (two seeds that agree by chance would turn any difference into many σ)."""
     sigma = math.hypot(ours_std, paper_std) if not (math.isnan(ours_std) or math.isnan(paper_std)) else math.nan
-    return Comparison(float(ours) - float(paper), sigma, k)
+    too_few = ""
+    if n_ours is not None and n_ours < MIN_SEEDS:
+        too_few = f"too few seeds to judge ({n_ours}; {MIN_SEEDS} needed)"
+    elif n_ours is not None and ours_std == 0:
+        too_few = f"no spread over our {n_ours} seeds to judge by"
+    return Comparison(float(ours) - float(paper), sigma, k, too_few)
 
 
 def seed_stats(values) -> tuple[float, float, int]:

@@ -48,7 +48,7 @@ def _mean_std_rows(label: str, key: str, g: pd.DataFrame, metrics, paper: dict |
             rows.append([label, NAMES[m], n, ours, "–", "–", "not in the paper"])
             continue
         p_mean, p_std = paper[m]
-        c = compare(mean, std, p_mean, p_std, k)
+        c = compare(mean, std, p_mean, p_std, k, n_ours=n)
         rows.append([label, NAMES[m], n, ours, pm(p_mean, p_std, digits), signed(c.diff), c.verdict()])
         gaps.append(Gap(key, m, c.diff, c.within))
         if c.within:
@@ -158,10 +158,10 @@ def table4_markers_section(df: pd.DataFrame, sweep: pd.DataFrame | None = None, 
             continue
         judged = []
         for m in RATES:
-            std = math.nan
+            std, n = math.nan, None
             if sweep is not None and m in SWEEP_METRICS and config in SEED_SWEEP:
-                std = seed_stats(sweep.loc[sweep["config"] == config, m])[1]
-            c = compare(ours[m], std, paper[m], SEED_SWEEP.get(config, {}).get(m, (0, math.nan))[1], k)
+                _, std, n = seed_stats(sweep.loc[sweep["config"] == config, m])
+            c = compare(ours[m], std, paper[m], SEED_SWEEP.get(config, {}).get(m, (0, math.nan))[1], k, n_ours=n)
             gaps.append(Gap(config, m, c.diff, c.within))
             if c.within is not None:
                 judged.append(f"{NAMES[m]} {c.verdict()}")
@@ -240,7 +240,8 @@ def twin_ablation_section(df: pd.DataFrame, k: float = 2.0) -> Section:
                          num(paper["fg_iou"][0], d), num(paper["bg_iou"][0], d)])
         if {"loop", "calibrated"} <= set(by):
             lo, ca = by["loop"], by["calibrated"]
-            cmp = {m: compare(lo[f"{m}_mean"], lo[f"{m}_std"], ca[f"{m}_mean"], ca[f"{m}_std"], k)
+            seeds = int(min(lo["n_seeds"], ca["n_seeds"]))
+            cmp = {m: compare(lo[f"{m}_mean"], lo[f"{m}_std"], ca[f"{m}_mean"], ca[f"{m}_std"], k, n_ours=seeds)
                    for m in ("auroc", "ap")}
             rows.append([title(exp), "loop − calibrated", "", *[f"{signed(c.diff)} ({c.verdict()})"
                                                               for c in cmp.values()],

@@ -222,7 +222,9 @@ def build_page(root: str | Path, explanations: str | Path, folders_file: str | P
                          "it).\n")
         else:
             parts.append(f"## {sec.title}\n\n{sec.body}")
-    parts += ["## Figures\n\n" + figures(root, link),
+    report_note = (f"Every table and figure with its caption and the rule that made it: the Snakemake report "
+                   f"[report.html]({link('report.html')}) (`snakemake --report results/report.html`).\n\n")
+    parts += ["## Figures\n\n" + report_note + figures(root, link),
               "## Where and why they differ\n\n" + differences(secs, expl, info["profile"], k),
               "## Folders\n\n" + folders(root, folders_file, link)]
     return "\n".join(parts), secs

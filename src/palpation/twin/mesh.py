@@ -101,8 +101,20 @@ def boundary_triangles(tets: np.ndarray) -> np.ndarray:
     return faces[np.sort(idx[counts == 1])].astype(np.int32)
 
 
+def _import_gmsh():
+    """gmsh, imported only when a mesh is built: a GPU node runs on cached meshes without it."""
+    try:
+        import gmsh
+    except ImportError as exc:
+        raise ModuleNotFoundError(
+            "gmsh is not installed, so no mesh can be built here: build results/twin/mesh_<resolution>.npz "
+            "where gmsh is (`snakemake results/twin/mesh_coarse.npz`) and point PALPATION_MESH_CACHE at "
+            "that folder, or `pip install gmsh`") from exc
+    return gmsh
+
+
 def _generate_gmsh_mm(length_factor: float) -> tuple[np.ndarray, np.ndarray]:
-    import gmsh  # heavy import, only needed when meshing
+    gmsh = _import_gmsh()
 
     gmsh.initialize(interruptible=False)
     try:
@@ -231,7 +243,7 @@ def build_vessel_points(center=(0.039, 0.039, 0.012), radius: float = 0.002, len
     gmsh cylinder along z in mm, rotated R_y(90 deg) onto x; with the reference options this is
     the reference's 506-node mesh. Only the nearest-centroid contact rule uses these points.
     """
-    import gmsh
+    gmsh = _import_gmsh()
 
     gmsh.initialize(interruptible=False)
     try:

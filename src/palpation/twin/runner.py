@@ -30,6 +30,7 @@ from palpation.twin.parameters import by_env_key, per_env_keys
 from palpation.twin.simulator import BatchedTwin
 from palpation.twin.trajectory import (Trajectory, mount_offset, padded_schedule, plan_trajectories, waypoints,
                                        with_mount)
+from palpation.twin.warp_runtime import init_warp
 
 log = logging.getLogger(__name__)
 READ_FAILED_EVERY = 20  # frames between host reads of the failure flags (the reference's interval)
@@ -175,6 +176,7 @@ def run_batch(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest],
     """
     if not requests:
         raise ValueError("run_batch needs at least one EnvRequest")
+    init_warp()
     device = wp.get_device(device or cfg.device)
     image = ImageSimilarity.from_config(cfg.camera)  # camera error (residual loop); identity by default
     if binding is None:

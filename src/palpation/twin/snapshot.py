@@ -21,6 +21,7 @@ import warp as wp
 from palpation.twin.config import TwinConfig
 from palpation.twin.markers import MarkerBinding, bind_markers, project_markers_np
 from palpation.twin.mesh import SensorMesh
+from palpation.twin.warp_runtime import init_warp
 from palpation.twin.runner import EnvRequest, ScheduledBatch, plan_requests
 
 # stop(frame, markers (n, 127, 2) px, T_BA (n, 4, 4)) -> (n,) bool: stop these envs at this frame
@@ -45,6 +46,7 @@ def run_until(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest], sto
     """Simulate until every env stopped (rule or `last_frame`, default its trajectory's last frame)."""
     if not requests:
         raise ValueError("run_until needs at least one EnvRequest")
+    init_warp()
     device = wp.get_device(device or cfg.device)
     if binding is None:
         from palpation.markers.template import rest_template

@@ -1,0 +1,29 @@
+"""twin.benchmark: a full batch is timed unless told otherwise, and estimates say so in their names."""
+
+import json
+
+from palpation.twin import benchmark
+from palpation.twin.config import TwinConfig
+
+CORE = {"core_substeps_per_s", "core_substep_us", "roofline_fraction_streamed",
+        "roofline_fraction_compulsory", "bandwidth_bytes_per_s"}
+
+
+def test_default_times_the_full_slide(mesh):
+    rec = benchmark.bench_point(mesh, TwinConfig(), 1, "cpu")
+    assert rec["frames_timed"] == rec["frames"] == 398
+    assert rec["wall_s_measured"] > 0 and not any("extrapolat" in k for k in rec)
+    assert CORE <= rec.keys()
+    assert abs(rec["core_substep_us"] * rec["core_substeps_per_s"] - 1e6) < 1e-3
+
+
+def test_fewer_frames_are_named_extrapolated(mesh, tmp_path, monkeypatch):
+    monkeypatch.setattr(benchmark.SensorMesh, "load", classmethod(lambda cls, path: mesh))
+    out = tmp_path / "twin.json"
+    benchmark.main(["--device", "cpu", "--resolutions", "coarse", "--n-envs", "2", "--max-frames", "3",
+                    "--out", str(out)])
+    (rec,) = json.loads(out.read_text())
+    assert rec["frames_timed"] == rec["extrapolated_from_frames"] == 3
+    assert {"wall_s_extrapolated", "trajectories_per_hour_extrapolated"} <= rec.keys()
+    assert "wall_s_measured" not in rec and "trajectories_per_hour" not in rec and "wall_s" not in rec
+    assert CORE <= rec.keys()
