@@ -48,3 +48,28 @@ rule silicone_check:
         "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.silicone task=check"
         " out.npz={input.npz} prediction_video={input.video}"
         " out.agreement={output.json} {params.hydra} > {log} 2>&1"
+
+
+# Issue 12: the Silicone set as measured sequences (markers + reconstructed poses + photo vessels).
+rule silicone_sequences:
+    input:
+        npz=rules.silicone_set.output.npz,
+        rest_photo=f"{PHOTOS}/sensor_default_state.png",
+        labels="data/reference/phantom/phantom-labels-vgg.json",
+        conf=conf_files("silicone_sequences"),
+    output:
+        npz="results/data/silicone/silicone_sequences.npz",
+        json="results/data/silicone/silicone_sequences.json",
+    params:
+        rule="silicone_sequences",
+        py=PY,
+        hydra=lambda wildcards, output: hydra_dir(output.npz),
+        stem=lambda wildcards, output: output.npz[: -len(".npz")],
+    log:
+        "results/logs/data/silicone_sequences.log",
+    conda:
+        CONDA_ENV
+    shell:
+        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.silicone_sequences"
+        " silicone={input.npz} template_photo={input.rest_photo}"
+        " out.sequences={params.stem} {params.hydra} > {log} 2>&1"

@@ -82,6 +82,14 @@ class ContactConfig:
     c_s: float = 0.0  # N s/m^2, phantom surface damping (same form as c_n)
     slip_eps: float = 1e-6  # m/s, no tangential force below this slip speed (reference 5e-6 sim)
     rule: str = "sdf"  # "sdf": node vs analytic vessel SDF; "centroid": reference triangle rule
+    # compliant phantom (issue 12; twin.contact): "node" = k_s per surface node (above); "foundation" =
+    # a Winkler foundation k_f (pressure per penetration) stiffened over the scene's vessel inclusions.
+    # Acts only with phantom_contact; the values are modelling choices bounded in twin.parameters.
+    phantom_model: str = "node"
+    k_f: float = 1.0e7  # N/m^3: E ~ 200 kPa silicone over a ~20 mm column
+    incl_ratio: float = 5.0  # E_vessel / E_phantom
+    incl_depth: float = 0.003  # m, vessel axis below the phantom top (SPEC §3.1's 3 mm)
+    incl_diameter: float = 0.0046  # m, the median of the phantom photo's vessel widths
 
 
 @dataclass
@@ -92,6 +100,11 @@ class SceneConfig:
     vessel_depth: float = 0.003  # axis below the phantom top
     vessel_center_x: float = 0.039  # m, centre of the axis (SPEC §3.1: 0.195 sim)
     vessel_center_y: float = 0.039
+    # m, effective column height of the Winkler foundation (contact.phantom_model): a half-space loaded over
+    # a contact of radius a is stressed to a depth ~a (~10 mm here), not through the whole phantom
+    phantom_thickness: float = 0.008
+    # vessel centreline segments of the compliant phantom, [x0, y0, x1, y1] world metres each (issue 12)
+    inclusions: list[list[float]] = field(default_factory=list)
 
 
 @dataclass
@@ -177,6 +190,14 @@ class TwinConfig:
             raise ValueError(f"twin.material.nu={self.material.nu}: must lie in (0, 0.5)")
         if self.material.lame not in ("standard", "smith"):
             raise ValueError(f"twin.material.lame={self.material.lame!r}: use 'standard' or 'smith'")
+        if self.contact.phantom_model not in ("node", "foundation"):
+            raise ValueError(f"twin.contact.phantom_model={self.contact.phantom_model!r}: use 'node' or 'foundation'")
+        if self.contact.phantom_model == "foundation" and self.contact.rule == "centroid":
+            raise ValueError("twin.contact.phantom_model='foundation' needs contact.rule='sdf'")
+        if any(len(seg) != 4 for seg in self.scene.inclusions):
+            raise ValueError("twin.scene.inclusions: each segment is [x0, y0, x1, y1] in world metres")
+        if self.scene.phantom_thickness <= 0:
+            raise ValueError(f"twin.scene.phantom_thickness={self.scene.phantom_thickness}: must be > 0 m")
         if self.contact.rule not in ("sdf", "centroid"):
             raise ValueError(f"twin.contact.rule={self.contact.rule!r}: use 'sdf' or 'centroid'")
         if self.health.check_every < 1:

@@ -7,6 +7,15 @@ SPEC §3.3). Normal force on a node at signed distance d < 0 with outward normal
 which keeps the reference's form where the damping term is also multiplied by the depth (quirk 11).
 Tangential: F_t = -t * min(k_t |v_t|, mu |F_n|) for slip |v_t| > slip_eps (reference rule, §3.3).
 
+Compliant phantom (issue 12, `foundation_on`, off by default): the phantom is a Winkler foundation, pressure
+= k_f * penetration, so a surface node of projected rest area A_i at depth d < 0 gets the stiffness
+k_f * s * A_i in the same penalty form. Vessels are stiffer inclusions (cylinders of diameter D with their
+axis at depth h below the top, along the scene's centreline segments, E_vessel = ratio * E_phantom):
+in a column of height H (scene.phantom_thickness) the foundation is springs in series,
+1/k = (H - t)/E + t/(ratio E), so s = 1 / (1 - (t/H)(1 - 1/ratio)), where t is the inclusion's thickness
+under the node. Load spreads at 45 degrees (the 2:1 rule), so the surface sees the vessel over a half-width
+w = max(h, D/2) around its axis: t(r) = D sqrt(1 - (r/w)^2) at lateral distance r (0 beyond w).
+
 `eval_centroid_contact` is the reference's own rule (§3.3) as an option: each vessel mesh node
 finds the sensor contact triangle with the nearest centroid and pushes its 3 vertices (1/3 each).
 """
@@ -31,6 +40,17 @@ class ContactParams:
     phantom_top_z: float
     phantom_on: int
     slip_eps: float
+    # compliant phantom with vessel inclusions (issue 12); unused unless foundation_on
+    k_f: wp.array(dtype=float)  # per env, foundation modulus N/m^3 (pressure per penetration)
+    incl_ratio: wp.array(dtype=float)  # per env, E_vessel / E_phantom
+    incl_depth: wp.array(dtype=float)  # per env, m, vessel axis below the phantom top
+    incl_diameter: wp.array(dtype=float)  # per env, m
+    node_area: wp.array(dtype=float)  # per mesh node, projected rest area on the contact triangles, m^2
+    seg_a: wp.array(dtype=wp.vec2)  # vessel centreline segments, world x, y (m)
+    seg_b: wp.array(dtype=wp.vec2)
+    n_seg: int
+    phantom_thickness: float
+    foundation_on: int
 
 
 @wp.func
@@ -69,7 +89,38 @@ def contact_force(d: float, n: wp.vec3, v: wp.vec3, k_n: float, c_n: float, k_t:
 
 
 @wp.func
-def surface_contact_force(xi: wp.vec3, vel: wp.vec3, env: int, p: ContactParams, vessel_sdf_on: int):
+def segment_distance(q: wp.vec2, a: wp.vec2, b: wp.vec2):
+    """Distance from q to the segment ab in the plane."""
+    ab = b - a
+    ll = wp.dot(ab, ab)
+    u = float(0.0)
+    if ll > 0.0:
+        u = wp.clamp(wp.dot(q - a, ab) / ll, 0.0, 1.0)
+    return wp.length(q - (a + u * ab))
+
+
+@wp.func
+def foundation_scale(xi: wp.vec3, env: int, p: ContactParams):
+    """Local foundation stiffening s >= 1 by the nearest vessel inclusion (module docstring)."""
+    ratio = p.incl_ratio[env]
+    if p.n_seg == 0 or ratio == 1.0:
+        return 1.0
+    q = wp.vec2(xi[0], xi[1])
+    r = float(1.0e30)
+    for k in range(p.n_seg):
+        r = wp.min(r, segment_distance(q, p.seg_a[k], p.seg_b[k]))
+    diam = p.incl_diameter[env]
+    w = wp.max(p.incl_depth[env], 0.5 * diam)
+    if r >= w:
+        return 1.0
+    t = diam * wp.sqrt(1.0 - (r / w) * (r / w))
+    frac = wp.min(t / p.phantom_thickness, 0.95)  # a vessel never fills the whole column
+    return 1.0 / (1.0 - frac * (1.0 - 1.0 / ratio))
+
+
+@wp.func
+def surface_contact_force(xi: wp.vec3, vel: wp.vec3, env: int, node: int, p: ContactParams,
+                          vessel_sdf_on: int):
     """Vessel (SDF) + phantom force on one surface node, and 1 if it touches the vessel."""
     fc = wp.vec3(0.0)
     touched = int(0)
@@ -78,7 +129,13 @@ def surface_contact_force(xi: wp.vec3, vel: wp.vec3, env: int, p: ContactParams,
         if d < 0.0:
             fc += contact_force(d, n, vel, p.k_n[env], p.c_n[env], p.k_t[env], p.mu[env], p.slip_eps)
             touched = 1
-    if p.phantom_on != 0:
+    if p.foundation_on != 0:
+        d = xi[2] - p.phantom_top_z
+        if d < 0.0:
+            k = p.k_f[env] * p.node_area[node] * foundation_scale(xi, env, p)
+            fc += contact_force(d, wp.vec3(0.0, 0.0, 1.0), vel, k, p.c_s[env], p.k_t[env], p.mu[env],
+                                p.slip_eps)
+    elif p.phantom_on != 0:
         d = xi[2] - p.phantom_top_z
         if d < 0.0:
             fc += contact_force(d, wp.vec3(0.0, 0.0, 1.0), vel, p.k_s[env], p.c_s[env], p.k_t[env],
@@ -107,7 +164,7 @@ def eval_contact_forces(
     i = env * n_nodes + node
     # SPEC §2.4: contact sees the velocity already updated by this substep's elastic force
     vel = v[i] + dt * inv_mass[node] * f[i]
-    fc, touched = surface_contact_force(x[i], vel, env, p, vessel_sdf_on)
+    fc, touched = surface_contact_force(x[i], vel, env, node, p, vessel_sdf_on)
     if touched != 0:
         contact_flag[env] = 1
     f_c[i] = fc

@@ -118,7 +118,7 @@ def integrate_contact_nodes(
     vel = v[tid] + w * fi
     xi = x[tid]
     if on_surface[node] != 0:
-        fc, touched = surface_contact_force(xi, vel, env, p, 1)
+        fc, touched = surface_contact_force(xi, vel, env, node, p, 1)
         f_c[tid] = fc
         if touched != 0:
             contact_flag[env] = 1

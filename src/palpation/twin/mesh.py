@@ -262,3 +262,15 @@ def build_vessel_points(center=(0.039, 0.039, 0.012), radius: float = 0.002, len
     p = xyz.reshape(-1, 3) * 1e-3
     along_x = np.stack([p[:, 2], p[:, 1], -p[:, 0]], axis=1)  # R_y(90): (x, y, z) -> (z, y, -x)
     return along_x + np.asarray(center) - [0.5 * length, 0.0, 0.0]
+
+
+def projected_node_area(mesh: SensorMesh) -> np.ndarray:
+    """(N,) rest area of each node's share (1/3) of its contact triangles, projected on the body xy plane:
+    what a Winkler foundation under the dome presses on (twin.contact); 0 off the contact skin."""
+    tri = np.asarray(mesh.contact_tris, np.int64)
+    area = np.zeros(mesh.n_nodes)
+    if len(tri):
+        p = mesh.nodes[tri]
+        cross_z = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])[:, 2]
+        np.add.at(area, tri.ravel(), np.repeat(0.5 * np.abs(cross_z) / 3.0, 3))
+    return area.astype(np.float32)

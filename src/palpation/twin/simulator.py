@@ -21,7 +21,7 @@ from palpation.twin.elasticity import (courant_dt, eval_elastic_forces, eval_ela
 from palpation.twin.integrate import (advance_frame, check_nodes, check_tets, integrate_contact_nodes,
                                       integrate_nodes, load_frame_poses, reset_velocities,
                                       set_control_velocity, snap_fixed_nodes)
-from palpation.twin.mesh import SensorMesh, build_vessel_points, shell_weights
+from palpation.twin.mesh import SensorMesh, build_vessel_points, projected_node_area, shell_weights
 from palpation.twin.warp_runtime import init_warp
 from palpation.twin.parameters import CONTACT_KEYS, ENV_KEYS, LAYERED_KEYS, by_env_key, per_env_keys
 
@@ -118,6 +118,10 @@ class BatchedTwin:
         self.contact.phantom_top_z = s.phantom_top_z
         self.contact.phantom_on = int(c.phantom_contact)
         self.contact.slip_eps = c.slip_eps
+        self.contact.foundation_on = int(c.phantom_contact and c.phantom_model == "foundation")
+        self.contact.phantom_thickness = s.phantom_thickness
+        self.contact.node_area = wp.array(projected_node_area(mesh), dtype=float, device=dev)
+        self.set_inclusions(np.asarray(s.inclusions, np.float64).reshape(-1, 2, 2))
 
         self.centroid_rule = c.rule == "centroid"
         if self.centroid_rule:
@@ -143,6 +147,18 @@ class BatchedTwin:
         if self.dt > 1.5 * limit:  # measured limits are 1.25-1.5x this estimate (docs/twin.md)
             log.warning("dt=%.3g s is over 1.5x the Courant estimate %.3g s of this mesh: expect "
                         "divergence", self.dt, limit)
+
+    def set_inclusions(self, segments_m: np.ndarray) -> None:
+        """Vessel centreline segments (S, 2, 2) world x, y metres of the compliant phantom (twin.contact)."""
+        seg = np.asarray(segments_m, np.float64).reshape(-1, 2, 2)
+        if not np.all(np.isfinite(seg)):
+            raise ValueError("set_inclusions: vessel segments must be finite world x, y metres")
+        pad = seg if len(seg) else np.zeros((1, 2, 2))  # Warp arrays need one element
+        self.contact.seg_a = wp.array(pad[:, 0].astype(np.float32), dtype=wp.vec2, device=self.device)
+        self.contact.seg_b = wp.array(pad[:, 1].astype(np.float32), dtype=wp.vec2, device=self.device)
+        self.contact.n_seg = len(seg)
+        self.graph = None  # a captured graph holds the old struct
+        self._sched_graph = None
 
     # ---- parameters and state -------------------------------------------------------------
     def set_env_params(self, params: dict[str, np.ndarray]) -> None:

@@ -1,0 +1,87 @@
+"""Hydra entry point: the residual loop on measured slides (issue 12; docs/loop.md "Slides").
+
+Reads a sequence set (`sequences`), keeps `trials` and `frames`, and runs loop.slide_loop with the twin
+of the real scene (loop.slides). Writes `out.csv` (one row per fold and round: fold, round, effect_added,
+mae_fit_px, mae_heldout_px, vessel_ratio_sim, vessel_ratio_real) and `out.json` (parameters per round).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+
+import hydra
+import numpy as np
+from omegaconf import DictConfig, OmegaConf
+
+from palpation.config_check import app_main
+from palpation.io import csv_text, save_json, save_text
+from palpation.loop.slide_loop import COLUMNS, SlideLoopSettings, run_slide_loop
+from palpation.loop.slides import frame_mae, make_scene, replay
+from palpation.measured_sequences import SequenceSet, load_sequence_set
+from palpation.twin.config import TwinConfig
+from palpation.twin.markers import bind_markers
+from palpation.twin.mesh import SensorMesh, cached_sensor_mesh
+
+log = logging.getLogger(__name__)
+
+
+def select(sset: SequenceSet, trials, frames) -> tuple[SequenceSet, list[int]]:
+    """The chosen 1-based trials and [first, end) frames of a set, and the trials' numbers."""
+    numbers = list(range(1, sset.n_trials + 1)) if trials is None else [int(t) for t in trials]
+    bad = [t for t in numbers if not 1 <= t <= sset.n_trials]
+    if bad:
+        raise ValueError(f"conf/slide_loop.yaml: trials {bad} outside 1..{sset.n_trials} of the sequence set")
+    sub = sset.subset([t - 1 for t in numbers])
+    if frames is not None:
+        first, end = (int(f) for f in frames)
+        if not 0 <= first < end <= sset.n_frames or end - first < 2:
+            raise ValueError(f"conf/slide_loop.yaml: frames [{first}, {end}) must hold >= 2 of 0..{sset.n_frames}")
+        cut = slice(first, end)
+        sub = dataclasses.replace(sub, markers=sub.markers[:, cut], displacement=sub.displacement[:, cut],
+                                  found=sub.found[:, cut], pose_mm=sub.pose_mm[:, cut],
+                                  labels=None if sub.labels is None else sub.labels[:, cut])
+    return sub, numbers
+
+
+def run(cfg: DictConfig) -> dict:
+    twin: TwinConfig = OmegaConf.to_object(cfg.twin)
+    grid = OmegaConf.to_container(cfg.effects, resolve=True)
+    settings = SlideLoopSettings(effects=grid, base=OmegaConf.to_container(cfg.base, resolve=True),
+                                 max_rounds=int(cfg.max_rounds),
+                                 min_improvement_px=float(cfg.min_improvement_px)).validate()
+    sset = load_sequence_set(cfg.sequences)
+    sub, numbers = select(sset, cfg.trials, cfg.frames)
+    mesh = SensorMesh.load(cfg.mesh) if cfg.mesh else cached_sensor_mesh(twin.mesh.resolution)
+    binding = bind_markers(mesh.nodes, mesh.dome_nodes, sset.rest)
+    scene = make_scene(sset)
+
+    def evaluate(part: SequenceSet, candidates: list[dict]):
+        return replay(mesh, twin, binding, part, scene, candidates, device=twin.device)
+
+    start = time.perf_counter()
+    result = run_slide_loop(evaluate, sub, settings, numbers)
+    # the floor a twin must beat: no motion at all (every frame predicted as the rest template)
+    static = frame_mae(np.broadcast_to(sub.rest, sub.markers.shape).astype(np.float64), sub)
+    result["static_mae_px"] = {f: float(static[[numbers.index(t) for t in ts]].mean())
+                               for f, ts in result["folds"].items()}
+    log.info("no-motion floor (rest template as every frame), per fold: %s", result["static_mae_px"])
+    wall = time.perf_counter() - start
+    save_text(cfg.out.csv, csv_text(result["rows"], COLUMNS, 4, na_rep="nan"))
+    size = {"trials": numbers, "frames": list(cfg.frames) if cfg.frames is not None else [0, sset.n_frames],
+            "mesh": twin.mesh.resolution, "device": str(twin.device)}
+    save_json(cfg.out.json, {"sequences": str(cfg.sequences), "size": size, "wall_s": wall, **result,
+                             "settings": dataclasses.asdict(settings)})
+    log.info("slide loop: %d rows in %.0f s -> %s", len(result["rows"]), wall, cfg.out.csv)
+    return result
+
+
+@hydra.main(version_base="1.3", config_path="../../../conf", config_name="slide_loop")
+@app_main("slide_loop")
+def main(cfg: DictConfig) -> None:
+    run(cfg)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,119 @@
+"""The residual loop on measured slides (issue 12): per fold, add the candidate effect that lowers the
+per-frame marker MAE on the fold's trials most, round by round, and score each round on the other fold.
+
+An effect is a grid of values of registry parameters (conf/slide_loop.yaml `effects`): lists of one
+effect move together (value i of every list is candidate i). A round evaluates every remaining effect's
+candidates on the fitted trials in one twin batch, keeps the best if it lowers the fitted MAE by at least
+`min_improvement_px`, then replays the kept twin on the held-out trials. Which effect is chosen uses the
+fitted trials only; the held-out trials and the labels only score.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from palpation.loop.folds import other, trial_folds
+from palpation.loop.slides import SCHEDULE_KEYS, frame_mae, slide_modes, vessel_ratio
+from palpation.measured_sequences import SequenceSet
+from palpation.twin.parameters import PARAMETERS
+
+log = logging.getLogger(__name__)
+COLUMNS = ("fold", "round", "effect_added", "mae_fit_px", "mae_heldout_px", "vessel_ratio_sim", "vessel_ratio_real")
+Evaluate = Callable[[SequenceSet, list[dict]], tuple[np.ndarray, np.ndarray]]  # -> markers (C,T,F,127,2), failed (C,T)
+
+
+@dataclass
+class SlideLoopSettings:
+    effects: dict[str, dict[str, list[float]]]
+    base: dict[str, float] = field(default_factory=dict)
+    max_rounds: int = 3
+    min_improvement_px: float = 0.05
+
+    def validate(self, where: str = "conf/slide_loop.yaml") -> "SlideLoopSettings":
+        known = {p.name for p in PARAMETERS.values() if p.per_env} | set(SCHEDULE_KEYS)
+        for name in (*self.base, *(k for grid in self.effects.values() for k in grid)):
+            if name not in known:
+                raise ValueError(f"{where}: unknown parameter '{name}'; use one of {sorted(known)} "
+                                 "(palpation.twin.parameters)")
+        for effect, grid in self.effects.items():
+            lengths = {len(v) for v in grid.values()}
+            if len(lengths) != 1 or 0 in lengths:
+                raise ValueError(f"{where}: effects.{effect} needs value lists of one common, non-zero length "
+                                 f"(candidate i takes value i of each), got {({k: len(v) for k, v in grid.items()})}")
+            for name, values in grid.items():
+                p = PARAMETERS[name]
+                if not p.low <= min(values) <= max(values) <= p.high:
+                    raise ValueError(f"{where}: effects.{effect}.{name} = {list(values)} leaves its physical bounds "
+                                     f"[{p.low:g}, {p.high:g}] {p.unit} ({p.why}; palpation/twin/parameters.py)")
+        if self.max_rounds < 0 or self.min_improvement_px < 0:
+            raise ValueError(f"{where}: need max_rounds >= 0 and min_improvement_px >= 0")
+        return self
+
+
+def candidates_of(grid: dict[str, list[float]]) -> list[dict]:
+    names = list(grid)
+    return [dict(zip(names, map(float, values))) for values in zip(*(grid[n] for n in names))]
+
+
+def _score(evaluate: Evaluate, sset: SequenceSet, cands: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+    markers, failed = evaluate(sset, cands)
+    mae = frame_mae(np.nan_to_num(markers, nan=1e6), sset)
+    mae[failed] = np.inf  # a diverged twin never wins
+    return markers, mae.mean(axis=1)
+
+
+def run_fold(evaluate: Evaluate, fit: SequenceSet, held: SequenceSet, settings: SlideLoopSettings,
+             fold: str) -> tuple[list[dict], list[dict]]:
+    """Rows of one fold (round 0 = the base twin) and the parameters after each round."""
+    current = dict(settings.base)
+    real_ratio = vessel_ratio(held.markers, held.labels)
+
+    def row(k: int, effect: str, mae_fit: float) -> dict:
+        m_held, mae_held = _score(evaluate, held, [current])
+        r = {"fold": fold, "round": k, "effect_added": effect, "mae_fit_px": float(mae_fit),
+             "mae_heldout_px": float(mae_held[0]), "vessel_ratio_sim": vessel_ratio(m_held[0], held.labels),
+             "vessel_ratio_real": real_ratio, "modes_heldout": slide_modes(m_held[0], held)}
+        log.info("fold %s round %d (%s): fit %.3f px, held-out %.3f px, vessel ratio sim %.3f / real %.3f",
+                 fold, k, effect, r["mae_fit_px"], r["mae_heldout_px"], r["vessel_ratio_sim"], real_ratio)
+        return r
+
+    _, mae0 = _score(evaluate, fit, [current])
+    rows, params = [row(0, "none", mae0[0])], [dict(current)]
+    remaining = list(settings.effects)
+    for k in range(1, settings.max_rounds + 1):
+        cands, owners = [], []
+        for effect in remaining:
+            for c in candidates_of(settings.effects[effect]):
+                cands.append({**current, **c})
+                owners.append(effect)
+        if not cands:
+            break
+        _, mae = _score(evaluate, fit, cands)
+        best = int(np.argmin(mae))
+        if not mae[best] < rows[-1]["mae_fit_px"] - settings.min_improvement_px:
+            log.info("fold %s round %d: no effect lowers the fitted MAE by %.3f px (best %s %.3f); stop",
+                     fold, k, settings.min_improvement_px, owners[best], mae[best])
+            break
+        current = cands[best]
+        remaining.remove(owners[best])
+        rows.append(row(k, owners[best], mae[best]))
+        params.append(dict(current))
+    return rows, params
+
+
+def run_slide_loop(evaluate: Evaluate, sset: SequenceSet, settings: SlideLoopSettings,
+                   trial_numbers: list[int]) -> dict:
+    """Both folds: rows (COLUMNS), per-fold parameters per round, and the folds' trial numbers."""
+    folds = trial_folds(trial_numbers)
+    rows, params = [], {}
+    for fold, idx in folds.items():
+        fit, held = sset.subset(idx), sset.subset(folds[other(fold)])
+        fold_rows, fold_params = run_fold(evaluate, fit, held, settings, fold)
+        rows += fold_rows
+        params[fold] = fold_params
+    return {"rows": rows, "params": params,
+            "folds": {f: [trial_numbers[i] for i in idx] for f, idx in folds.items()}}

@@ -1,0 +1,186 @@
+"""The twin replayed along measured slides (issue 12): scene, pose schedule, markers per measured frame.
+
+* Scene: the sequence set's world mm are mapped onto the twin's world metres by a shift that puts the
+  mean pose over the twin's centre (CENTRE_XY_M); the axes are kept (robot x, y = twin x, y, an
+  assumption: the reconstructed Silicone poses carry no orientation). The vessels become the compliant
+  phantom's inclusion segments (twin.contact, phantom_model = foundation); the rigid vessel is off.
+* Schedule: the reference controller (SPEC §4.2: v = 100 e, |v| <= 100 mm/s, a waypoint is reached within
+  1 mm) drives the tip, translation only, through: 1 mm above the first pose, the surface, the first
+  pose at depth, then every measured pose in order. Frame k of the slide is the frame that reaches its
+  waypoint, so the twin's markers are read where the real sensor was photographed.
+* Metrics: per-frame marker MAE (px, over the markers found in the real frame) and the over-vessel /
+  off-vessel ratio of the marker motion about each trial's median position (SPEC §13.6's quantity:
+  real 1.55 / 1.45 px), both over the real labels.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from palpation.measured_sequences import SequenceSet
+from palpation.twin.config import TwinConfig
+from palpation.twin.markers import MarkerBinding, project_markers_np
+from palpation.twin.mesh import SensorMesh
+from palpation.twin.parameters import PARAMETERS
+from palpation.twin.runner import EnvRequest, ScheduledBatch, tip_node_B
+from palpation.twin.trajectory import (APPROACH_Z_M, BASE_ROTATION, CENTRE_XY_M, FRAME_DT_S, GAIN_PER_S, MAX_FRAMES,
+                                       PHANTOM_TOP_M, REACH_TOL_M, SPEED_CAP_M_S, Trajectory, padded_schedule,
+                                       pose_matrix)
+
+# registry parameters the replay applies outside the kernels: to the poses (mount dz) or to the projected
+# markers (anchor: that fraction of the rest offset template - bound rest, as twin.config.MarkerConfig)
+SCHEDULE_KEYS = ("mount_dz_mm", "marker_anchor")
+REACH_M = 0.030  # dome footprint radius (19 mm) + the widest inclusion spread (8 mm) + margin
+
+
+@dataclass(frozen=True)
+class Scene:
+    origin_mm: np.ndarray  # world x, y mm that lands on the twin's CENTRE_XY_M
+    segments_m: np.ndarray  # (S, 2, 2) vessel centreline segments, twin world metres
+
+    def to_twin(self, xy_mm: np.ndarray) -> np.ndarray:
+        return (np.asarray(xy_mm, np.float64) - self.origin_mm) * 1e-3 + CENTRE_XY_M
+
+    def near(self, tips_m: np.ndarray, reach_m: float = REACH_M) -> "Scene":
+        """Only the segments within `reach_m` of some tip position: the kernel loops over every segment."""
+        if not len(self.segments_m):
+            return self
+        a, b = self.segments_m[:, 0][:, None], self.segments_m[:, 1][:, None]
+        q = np.asarray(tips_m, np.float64).reshape(-1, 2)[None]
+        ab = b - a
+        u = np.clip(((q - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-18), 0.0, 1.0)
+        dist = np.linalg.norm(q - (a + u[..., None] * ab), axis=-1).min(axis=1)
+        return Scene(self.origin_mm, self.segments_m[dist < reach_m])
+
+
+def make_scene(sset: SequenceSet) -> Scene:
+    origin = sset.pose_mm[..., :2].reshape(-1, 2).mean(axis=0)
+    scene = Scene(origin, np.zeros((0, 2, 2)))
+    segs = [np.stack([scene.to_twin(c[:-1]), scene.to_twin(c[1:])], axis=1) for c in sset.centrelines()]
+    return Scene(origin, np.concatenate(segs) if segs else np.zeros((0, 2, 2)))
+
+
+def scene_config(cfg: TwinConfig, scene: Scene) -> TwinConfig:
+    """The twin of the real scene: compliant phantom with the vessels as inclusions, no rigid vessel."""
+    contact = dataclasses.replace(cfg.contact, phantom_contact=True, phantom_model="foundation", vessel=False)
+    sc = dataclasses.replace(cfg.scene, inclusions=[list(map(float, s.ravel())) for s in scene.segments_m])
+    return dataclasses.replace(cfg, contact=contact, scene=sc).validate()
+
+
+def plan_replay(pose_mm: np.ndarray, scene: Scene, tip_B_m: np.ndarray, dz_mm: float = 0.0,
+                frame_dt_s: float = FRAME_DT_S) -> tuple[Trajectory, np.ndarray]:
+    """The pose schedule through one trial's measured poses (F, 3) and the frame that reaches each."""
+    pose = np.asarray(pose_mm, np.float64)
+    xy = scene.to_twin(pose[:, :2])
+    z = PHANTOM_TOP_M - (pose[:, 2] + dz_mm) * 1e-3
+    table = np.concatenate([[[*xy[0], APPROACH_Z_M[0]], [*xy[0], APPROACH_Z_M[1]]], np.column_stack([xy, z])])
+    R = BASE_ROTATION.as_matrix()
+    offset = R @ np.asarray(tip_B_m, np.float64)
+    tip = table[0].copy()
+    target, poses, reached_at = 0, [], []
+    while True:
+        if len(poses) >= MAX_FRAMES * 4:
+            raise ValueError(f"replay: waypoint {target} not reached within {len(poses)} frames; check pose_mm units (mm)")
+        error = table[target] - tip
+        if np.linalg.norm(error) < REACH_TOL_M:  # reached: this frame applies no motion (SPEC §4.2)
+            reached_at.append(len(poses))
+            poses.append(pose_matrix(BASE_ROTATION, tip - offset))
+            if target == len(table) - 1:
+                break
+            target += 1
+            continue
+        v = GAIN_PER_S * error
+        speed = np.linalg.norm(v)
+        if speed > SPEED_CAP_M_S:
+            v *= SPEED_CAP_M_S / speed
+        tip = tip + v * frame_dt_s
+        poses.append(pose_matrix(BASE_ROTATION, tip - offset))
+    traj = Trajectory(kind="slide", T_BA0=pose_matrix(BASE_ROTATION, table[0] - offset), T_BA=np.stack(poses),
+                      record_from=0, frame_dt_s=frame_dt_s)
+    return traj, np.array(reached_at[2:])  # the measured frames (after the two approach waypoints)
+
+
+def split_params(params: dict) -> tuple[dict, dict]:
+    """(kernel per-env values, schedule values) of one candidate; names are registry names."""
+    env_names = {p.name: p.field for p in PARAMETERS.values() if p.per_env}
+    unknown = sorted(set(params) - set(env_names) - set(SCHEDULE_KEYS))
+    if unknown:
+        raise ValueError(f"slide loop: unknown parameter(s) {unknown}; use per-env twin parameters "
+                         f"{sorted(env_names)} or {list(SCHEDULE_KEYS)} (palpation.twin.parameters)")
+    env = {env_names[k]: float(v) for k, v in params.items() if k in env_names}
+    return env, {k: float(v) for k, v in params.items() if k in SCHEDULE_KEYS}
+
+
+def replay(mesh: SensorMesh, cfg: TwinConfig, binding: MarkerBinding, sset: SequenceSet, scene: Scene,
+           candidates: list[dict], device: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Every candidate on every trial of `sset`, one batch: markers (C, T, F, 127, 2) px and failed (C, T).
+    `cfg` is the base twin; the scene (compliant phantom, the vessels near these slides) is added here."""
+    tip_B = tip_node_B(mesh)
+    reqs, trajs, samples, anchors = [], [], [], []
+    for params in candidates:
+        env, sched = split_params(params)
+        for t in range(sset.n_trials):
+            reqs.append(EnvRequest("slide", vessel=False, name=f"{sset.trials[t]['name']}", **env))
+            traj, frames = plan_replay(sset.pose_mm[t], scene, tip_B, sched.get("mount_dz_mm", 0.0), cfg.frame_dt)
+            trajs.append(traj)
+            samples.append(frames)
+            anchors.append(sched.get("marker_anchor", 0.0))
+    schedule, _ = padded_schedule(trajs)
+    cfg = scene_config(cfg, scene.near(schedule[:, :, :2, 3]))
+    reqs = [r.resolved(cfg) for r in reqs]
+    samples = np.stack(samples)  # (envs, F)
+    batch = ScheduledBatch(mesh, cfg, reqs, trajs, schedule, device or cfg.device)
+    out = np.full((len(reqs), sset.n_frames, len(binding.node_ix), 2), np.nan)
+    wanted = set(samples.ravel().tolist())
+    for f in batch.frames():
+        if f in wanted:
+            env_ix, frame_ix = np.nonzero(samples == f)
+            nodes = batch.sim.positions_world()[env_ix]
+            out[env_ix, frame_ix] = project_markers_np(binding, nodes, schedule[f, env_ix])
+        if f >= samples.max():
+            break
+    out += np.array(anchors)[:, None, None, None] * (binding.template_px - binding.rest_px)
+    failed = batch.sim.failed() | ~np.all(np.isfinite(out), axis=(1, 2, 3))
+    shape = (len(candidates), sset.n_trials)
+    return out.reshape(*shape, *out.shape[1:]), failed.reshape(shape)
+
+
+def frame_mae(sim: np.ndarray, sset: SequenceSet) -> np.ndarray:
+    """(..., T) per-trial mean over frames and found markers of |sim - real| px; sim (..., T, F, 127, 2)."""
+    err = np.linalg.norm(sim - sset.markers.astype(np.float64), axis=-1)  # (..., T, F, 127)
+    found = np.broadcast_to(sset.found, err.shape)
+    return np.where(found, err, 0.0).sum(axis=(-1, -2)) / found.sum(axis=(-1, -2))
+
+
+def vessel_ratio(markers: np.ndarray, labels: np.ndarray | None) -> float:
+    """Mean marker motion about each trial's median position over vessel-labelled markers / off them."""
+    if labels is None:
+        raise ValueError("the over-vessel / off-vessel split needs per-frame labels in the sequence set "
+                         "(key `labels`, docs/measured_format.md)")
+    m = np.asarray(markers, np.float64)
+    motion = np.linalg.norm(m - np.median(m, axis=1, keepdims=True), axis=-1)  # (T, F, 127)
+    on, off = labels == 1, labels == 0
+    if not on.any() or not off.any():
+        return float("nan")
+    return float(motion[on].mean() / motion[off].mean())
+
+
+def slide_modes(sim: np.ndarray, sset: SequenceSet) -> dict:
+    """The residual of every frame split into the photo loop's modes (loop.residual), averaged over the
+    frames of `sset`, plus the MAE over the vessel-labelled markers and off them (the detector's split)."""
+    from palpation.loop.residual import MODES, decompose
+
+    rows = [decompose(sim[t, f], sset.markers[t, f]).row() for t in range(sset.n_trials) for f in range(sset.n_frames)]
+    out = {f"share_{m}": float(np.mean([r[f"share_{m}"] for r in rows])) for m in MODES}
+    for key in ("rotation_deg", "scale_pct", "stretch_pct"):
+        out[key] = float(np.mean([r[key] for r in rows]))
+    out["translation_px"] = np.mean([r["translation_px"] for r in rows], axis=0).tolist()
+    if sset.labels is not None:
+        err = np.linalg.norm(np.asarray(sim, np.float64) - sset.markers, axis=-1)
+        on, off = (sset.labels == 1) & sset.found, (sset.labels == 0) & sset.found
+        out["mae_over_vessel_px"] = float(err[on].mean()) if on.any() else float("nan")
+        out["mae_off_vessel_px"] = float(err[off].mean()) if off.any() else float("nan")
+    return out

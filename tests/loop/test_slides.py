@@ -1,0 +1,101 @@
+"""The loop on measured slides (issue 12): folds by trial, the replay along measured poses, the rounds."""
+
+import numpy as np
+import pytest
+
+from palpation.loop.folds import other, trial_folds
+from palpation.loop.slide_loop import SlideLoopSettings, candidates_of, run_slide_loop
+from palpation.loop.slides import frame_mae, make_scene, plan_replay, replay, vessel_ratio
+from palpation.markers.template import rest_template
+from palpation.measured_sequences import make_sequence_set
+from palpation.twin.config import TwinConfig
+from palpation.twin.markers import bind_markers
+from palpation.twin.mesh import cached_sensor_mesh
+from palpation.twin.runner import tip_node_B
+from palpation.twin.trajectory import PHANTOM_TOP_M
+
+
+def toy_set(n_trials=4, n_frames=3, step_mm=2.0, seed=0):
+    rng = np.random.default_rng(seed)
+    rest = rest_template()
+    markers = rest + rng.normal(0, 1.0, (n_trials, n_frames, 127, 2))
+    pose = np.zeros((n_trials, n_frames, 3))
+    pose[..., 0] = np.arange(n_trials)[:, None] * 5.0
+    pose[..., 1] = -np.arange(n_frames) * step_mm
+    pose[..., 2] = 2.0
+    labels = np.zeros((n_trials, n_frames, 127), np.int8)
+    labels[..., :20] = 1
+    return make_sequence_set(markers, np.ones((n_trials, n_frames, 127), bool), rest, pose,
+                             [np.array([[-30.0, -2.0], [30.0, -2.0]])], [{"name": f"t{i + 1}"} for i in range(n_trials)],
+                             [4.0], labels=labels)
+
+
+def test_folds_split_by_trial_without_overlap():
+    folds = trial_folds([1, 2, 3, 4, 5, 6, 7, 8, 9, 10])
+    assert not set(folds["odd"]) & set(folds["even"])
+    assert sorted(folds["odd"] + folds["even"]) == list(range(10))
+    assert folds["odd"] == [0, 2, 4, 6, 8] and other("odd") == "even"
+    with pytest.raises(ValueError, match="leave fold"):
+        trial_folds([1, 3])
+    with pytest.raises(ValueError, match="unique"):
+        trial_folds([1, 1, 2])
+
+
+def test_replay_reaches_every_measured_pose():
+    s = toy_set(1, 3)
+    scene = make_scene(s)
+    traj, frames = plan_replay(s.pose_mm[0], scene, np.zeros(3))
+    assert len(frames) == 3 and np.all(np.diff(frames) > 0)
+    tips = traj.T_BA[frames][:, :3, 3]
+    want = np.column_stack([scene.to_twin(s.pose_mm[0, :, :2]), PHANTOM_TOP_M - s.pose_mm[0, :, 2] * 1e-3])
+    assert np.abs(tips - want).max() < 1e-3  # the controller's reach tolerance
+    deeper, _ = plan_replay(s.pose_mm[0], scene, np.zeros(3), dz_mm=0.5)
+    assert deeper.T_BA[-1][2, 3] == pytest.approx(traj.T_BA[-1][2, 3] - 5e-4, abs=1e-3)
+
+
+def test_replay_markers_and_metrics():
+    mesh = cached_sensor_mesh("coarse")
+    s = toy_set(1, 2, step_mm=1.5)
+    binding = bind_markers(mesh.nodes, mesh.dome_nodes, s.rest)
+    markers, failed = replay(mesh, TwinConfig(), binding, s, make_scene(s),
+                             [{"k_f": 1e7}, {"k_f": 1e8}, {"k_f": 1e7, "marker_anchor": 1.0}])
+    assert markers.shape == (3, 1, 2, 127, 2) and not failed.any() and np.isfinite(markers).all()
+    np.testing.assert_allclose(markers[2] - markers[0], np.broadcast_to(binding.template_px - binding.rest_px,
+                                                                        markers[0].shape), atol=1e-6)
+    markers = markers[:2]
+    moved = np.linalg.norm(markers - binding.rest_px, axis=-1).mean(axis=-1)
+    assert (moved[1] > moved[0]).all()  # a stiffer phantom deforms the dome more at the same depth
+    mae = frame_mae(markers, s)
+    assert mae.shape == (2, 1) and (mae > 0).all()
+    assert np.isfinite(vessel_ratio(markers[0], s.labels))
+
+
+def test_rounds_pick_the_effect_that_lowers_the_fitted_error():
+    s = toy_set(4, 2)
+    truth = s.markers.astype(np.float64)
+
+    def evaluate(part, cands):  # a fake twin: the error shrinks as k_f nears 3e7 and mu nears 0.8
+        out = []
+        for c in cands:
+            err = abs(np.log10(c.get("k_f", 1e7) / 3e7)) + abs(c.get("mu", 0.0) - 0.8)
+            idx = [int(t["name"][1:]) - 1 for t in part.trials]
+            out.append(truth[idx] + err)
+        return np.stack(out), np.zeros((len(cands), part.n_trials), bool)
+
+    settings = SlideLoopSettings(effects={"compliant_phantom": {"k_f": [3e6, 3e7]}, "friction": {"mu": [0.3, 0.8]},
+                                          "vessel_inclusion": {"incl_ratio": [5.0, 20.0]}},
+                                 base={"k_f": 1e7}, max_rounds=3, min_improvement_px=0.01).validate()
+    assert candidates_of({"mu": [0.3, 0.8], "k_t": [20, 60]}) == [{"mu": 0.3, "k_t": 20.0}, {"mu": 0.8, "k_t": 60.0}]
+    result = run_slide_loop(evaluate, s, settings, [1, 2, 3, 4])
+    rows = result["rows"]
+    for fold in ("odd", "even"):
+        fr = [r for r in rows if r["fold"] == fold]
+        assert [r["effect_added"] for r in fr] == ["none", "friction", "compliant_phantom"]  # then nothing helps
+        assert fr[-1]["mae_fit_px"] < fr[0]["mae_fit_px"] and fr[-1]["mae_heldout_px"] < fr[0]["mae_heldout_px"]
+    assert result["folds"] == {"odd": [1, 3], "even": [2, 4]}
+    modes = rows[0]["modes_heldout"]  # a uniform offset of the fake twin: all translation
+    assert modes["share_translation"] == pytest.approx(1.0) and modes["mae_over_vessel_px"] > 0
+    with pytest.raises(ValueError, match="leaves its physical bounds"):
+        SlideLoopSettings(effects={"f": {"mu": [3.0]}}).validate()
+    with pytest.raises(ValueError, match="unknown parameter 'young'"):
+        SlideLoopSettings(effects={"f": {"young": [3.0]}}).validate()

@@ -1,0 +1,31 @@
+# Issue 12: the residual loop on the real Silicone slides (docs/loop.md "Slides"). The sequence set comes
+# from rule silicone_sequences (silicone.smk); the twin of the scene is built inside the app.
+# Needs common.smk (PY, CONDA_ENV, hydra_dir, twin_mesh, TWIN_ARGS, GPU) and twin.smk (rule mesh).
+# Not in `all`: the quick size below runs on the CPU in ~10 min; the paper size needs the GPU
+# (trials=null frames=null twin=reference twin.device=cuda).
+
+
+rule slide_loop:
+    input:
+        npz=rules.silicone_sequences.output.npz,
+        mesh=twin_mesh(),
+        conf=conf_files("slide_loop", {"twin/mesh": config["twin_resolution"]}),
+    output:
+        csv="results/loop_slides/loop_slides.csv",
+        json="results/loop_slides/slide_loop.json",
+    params:
+        rule="slide_loop",
+        py=PY,
+        twin=TWIN_ARGS,
+        stem=lambda wildcards, input: input.npz[: -len(".npz")],
+        hydra=lambda wildcards, output: hydra_dir(output.csv),
+    resources:
+        gpu=GPU,
+    log:
+        "results/logs/loop/slide_loop.log",
+    conda:
+        CONDA_ENV
+    shell:
+        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.slide_loop {params.twin}"
+        " sequences={params.stem} mesh={input.mesh} out.csv={output.csv} out.json={output.json}"
+        " {params.hydra} > {log} 2>&1"
