@@ -20,7 +20,8 @@ from palpation.model.job import TrainJob, run_job
 
 log = logging.getLogger(__name__)
 RECIPE_KEYS = ("lr", "weight_decay", "focal_gamma", "norm_stats", "norm_clips", "rotation", "schedule",
-               "step_size", "step_gamma")
+               "step_size", "step_gamma", "jitter_px", "marker_dropout", "displacement_scale", "patience",
+               "select_metric", "calibration")
 
 
 def job_from_config(cfg: DictConfig) -> TrainJob:
