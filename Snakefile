@@ -16,6 +16,7 @@ include: "workflow/rules/loop.smk"
 include: "workflow/rules/dataset.smk"
 include: "workflow/rules/train.smk"
 include: "workflow/rules/maps.smk"
+include: "workflow/rules/recipe.smk"
 include: "workflow/rules/results_page.smk"
 
 from palpation.killed_jobs import killed_outputs  # a killed forced rerun's missing outputs (see there)
@@ -35,6 +36,7 @@ rule all:
         rules.train_report.output,
         TWIN_ABLATION_FILES,  # common.smk: empty where the profile skips the dataset-twin ablation
         rules.vessel_maps.output,
+        RECIPE_REPORT_FILES,  # common.smk: empty where the profile skips the recipe ablation
         rules.results_page.output,
         killed_outputs(),
 
