@@ -107,3 +107,34 @@ def test_recipes_compose_and_switch_off_restores_one_reference_value():
                    if getattr(off, f.name) != getattr(robust, f.name)}
         assert differs == set(SWITCHES[name]), name  # only the switch's own fields move
         assert all(getattr(off, k) == getattr(ref, k) for k in SWITCHES[name])
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    from palpation.graph.synthetic import write_silicone
+
+    root, rest = tmp_path_factory.mktemp("data"), rest_layout("ideal")
+    return {"sim": str(write_sim(root / "sim", rest, n_traj=7, n_frames=72)),
+            "silicone": str(write_silicone(root / "silicone.npz", rest, n_videos=2, n_frames=8)),
+            "meat": str(write_meat(root / "meat.npz", rest, n_frames=(9,) * 5, n_val=2))}
+
+
+def test_calibration_rescales_the_written_scores_only(data, tmp_path):
+    """calibration=platt: the same model (checkpoint bytes), scores = the fitted map of the raw ones."""
+    from palpation.apps.train import run
+    from palpation.metrics.calibration import Calibrator
+
+    base = ["experiment=C-to-B", "seed=0", "clip_len=3", "graph.rest=ideal", "train.batch_size=4", "train.epochs=1",
+            "train.train_batches=2", "train.val_batches=2", "tracking=false", "progress=false",
+            *[f"data.{k}={v}" for k, v in data.items()]]
+    out = {}
+    for cal in ("none", "platt"):
+        with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
+            cfg = compose(config_name="train", overrides=[*base, f"recipe.calibration={cal}"])
+        out[cal] = (run(cfg, tmp_path / cal), np.load(tmp_path / cal / "scores.npz")["probs"])
+    (m0, p0), (m1, p1) = out["none"], out["platt"]
+    assert "calibration" not in m0 and "test_raw" not in m0  # the reference metrics.json keeps its keys
+    assert (tmp_path / "none/checkpoint.pt").read_bytes() == (tmp_path / "platt/checkpoint.pt").read_bytes()
+    cal = Calibrator(**m1["calibration"])
+    assert cal.method == "platt" and np.allclose(p1, cal.apply(p0), atol=1e-6)
+    assert m1["test_raw"] == m0["test"] and m1["test"]["auroc"] == pytest.approx(m0["test"]["auroc"], abs=1e-3)

@@ -59,11 +59,12 @@ rule recipe_report:
         clip_len=TRAIN["clip_len"],
         profile=PROFILE,
         data=" ".join(f"data.{k}={v}" for k, v in TRAIN_DATA.items()),
-        out_dir=RECIPE_REPORT,
+        runs_root=lambda wildcards, input: Path(input.metrics[0]).parents[5],
+        out_dir=lambda wildcards, output: Path(output[0]).parent,
     conda:
         CONDA_ENV
     shell:
         "PALPATION_PROFILE={params.profile} SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.recipe_report"
-        " profile={params.profile} runs_root={RECIPE_DIR} out_dir={params.out_dir}"
+        " profile={params.profile} runs_root={params.runs_root} out_dir={params.out_dir}"
         " 'experiments={params.experiments}' 'seeds={params.seeds}' 'switches={params.switches}'"
         " clip_len={params.clip_len} {params.data} hydra.run.dir={params.out_dir} > {log} 2>&1"

@@ -49,7 +49,8 @@ def run(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
     params = OmegaConf.to_container(cfg, resolve=True)
     params.pop("hydra", None)
     params["recipe"].pop("sizes", None)  # the chosen sizes are in train.*
-    return run_job(job, out_dir, params=params, track=bool(cfg.tracking), tags=_overrides(),
+    tags = {**_overrides(), "recipe": str(cfg.recipe.name)}  # MLflow tags only; outputs do not carry them
+    return run_job(job, out_dir, params=params, track=bool(cfg.tracking), tags=tags,
                    progress=bool(cfg.progress))
 
 

@@ -2,8 +2,9 @@
 fitted on the training domain's validation split, expected calibration error and reliability bins.
 
 A calibrated score of 0.5 means "more likely than not". Temperature scaling (z / T) keeps the
-ranking and the 0.5 point; Platt scaling (a·z + b, scikit-learn's logistic regression on the logit)
-also moves the 0.5 point, which the focal loss's α shifts (α ≈ 0.96 weighs positives 24×).
+ranking and the 0.5 point; Platt scaling (a·z + b, a logistic regression on the logit)
+also moves the 0.5 point, which the focal loss's α shifts (α ≈ 0.96 weighs positives 24×); both are
+fitted by maximum likelihood with scipy, the Platt slope kept positive.
 """
 
 from __future__ import annotations
@@ -11,8 +12,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.optimize import minimize_scalar
-from sklearn.linear_model import LogisticRegression
+from scipy.optimize import minimize, minimize_scalar
 
 EPS = 1e-7  # float32 sigmoids saturate to exactly 0/1; clip before taking the logit
 N_BINS = 15
@@ -62,9 +62,10 @@ def fit_calibrator(probs, labels, method: str) -> Calibrator:
         res = minimize_scalar(lambda log_t: _nll(z / np.exp(log_t), y), bounds=(-5.0, 5.0), method="bounded",
                               options={"xatol": 1e-6})
         return Calibrator("temperature", float(np.exp(-res.x)), 0.0, int(y.size))
-    if method == "platt":
-        lr = LogisticRegression(C=1e6, tol=1e-10, max_iter=1000).fit(z[:, None], y.astype(int))
-        return Calibrator("platt", float(lr.coef_[0, 0]), float(lr.intercept_[0]), int(y.size))
+    if method == "platt":  # a > 0 keeps the ranking (a validation split that disagrees cannot invert it)
+        res = minimize(lambda ab: _nll(ab[0] * z + ab[1], y), x0=np.array([1.0, 0.0]), method="L-BFGS-B",
+                       bounds=[(1e-3, 1e3), (-50.0, 50.0)], options={"ftol": 1e-12, "gtol": 1e-9})
+        return Calibrator("platt", float(res.x[0]), float(res.x[1]), int(y.size))
     raise ValueError(f"unknown calibration method '{method}': use none, temperature or platt")
 
 
