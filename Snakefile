@@ -17,6 +17,7 @@ include: "workflow/rules/slides.smk"
 include: "workflow/rules/dataset.smk"
 include: "workflow/rules/train.smk"
 include: "workflow/rules/maps.smk"
+include: "workflow/rules/recipe.smk"
 include: "workflow/rules/results_page.smk"
 
 from palpation.killed_jobs import killed_outputs  # a killed forced rerun's missing outputs (see there)
@@ -36,6 +37,7 @@ rule all:
         plain(rules.train_report.output),
         plain(TWIN_ABLATION_FILES),  # common.smk: empty where the profile skips the dataset-twin ablation
         plain(rules.vessel_maps.output),
+        plain(RECIPE_REPORT_FILES),  # common.smk: empty where the profile skips the recipe ablation
         plain(rules.results_page.output),
         killed_outputs(),
 

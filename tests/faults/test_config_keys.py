@@ -19,8 +19,8 @@ def hydra_job():
     """compose(app, overrides) as a Hydra job sees it (HydraConfig set, overrides recorded)."""
     import palpation.calibration.config  # noqa: F401  (registers the structured configs)
     import palpation.loop.config  # noqa: F401
-    import palpation.mapping.config  # noqa: F401
-    import palpation.model.config  # noqa: F401
+    import palpation.mapping.config  # noqa: F401  (base_vessel_maps)
+    import palpation.model.config  # noqa: F401  (base_train; the folder alone failed without it)
     import palpation.twin.config  # noqa: F401
 
     def make(app: str, overrides=()):

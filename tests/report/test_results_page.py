@@ -216,7 +216,8 @@ def test_paper_numbers_have_one_home():
     assert round(sum(v["twin"] for v in paper.CALIBRATION_MAE.values()) / 4, 2) == paper.CALIBRATION_MEAN["twin"]
 
 
-RULES = ("common", "photos", "silicone", "meat", "twin", "simulate", "calibrate", "loop", "dataset", "train", "maps")
+RULES = ("common", "photos", "silicone", "meat", "twin", "simulate", "calibrate", "loop", "dataset", "train", "maps",
+         "recipe")
 
 
 def dry_run(work: Path, snakefile: str | None, *args: str) -> str:

@@ -67,6 +67,17 @@ TWIN_ABLATION_FILES = (
     [f"{TRAIN_REPORT}/twin_ablation.csv", f"{TRAIN_REPORT}/twin_ablation.md"] if TWIN_ABL["seeds"] else []
 )
 MAPS_CONFIGS = config["maps"].get("configs", TRAIN["experiments"])
+# The recipe ablation (issue 15, recipe.smk): runs <RECIPE_DIR>/<recipe>/<switch_off>/<exp>/L<n>/seed<s>/
+RECIPE_ABL = TRAIN["recipe_ablation"]
+RECIPE_DIR = "results/recipe"
+RECIPE_RUN = str(run_dir(f"{RECIPE_DIR}/{{recipe}}/{{switch}}", "{exp}", "{clip_len}", "{seed}"))
+RECIPE_REPORT = f"{RECIPE_DIR}/report"
+RECIPE_REPORT_FILES = (
+    [f"{RECIPE_REPORT}/{name}" for name in ("recipe_ablation.csv", "recipe_ablation.md", "uncertainty.csv",
+                                            "reliability.png", "reliability.pdf", "uncertainty_maps.png",
+                                            "uncertainty_maps.pdf", "recipe_report.json")]
+    if RECIPE_ABL["seeds"] else []
+)
 
 
 def plain(*outputs):
@@ -134,6 +145,31 @@ def train_overrides(wildcards, sim=TRAIN_DATA["sim"]):
     sizes = TRAIN["sizes"].get(EXPERIMENTS[wildcards.exp].model) or {}
     knobs = [f"train.{k}={v}" for k, v in sizes.items() if v is not None]
     return " ".join(data + knobs + [f"recipe={TRAIN['recipe']}"])
+
+
+def recipe_inputs(wildcards):
+    """The datasets and conf/ files of one recipe-ablation run (its recipe, not the profile's)."""
+    choices = {"experiment": wildcards.exp, "model": EXPERIMENTS[wildcards.exp].model, "recipe": wildcards.recipe}
+    return {**train_data(wildcards), "conf": conf_files("train", choices)}
+
+
+def recipe_overrides(wildcards):
+    """Dataset paths, the ablation's sizes for this recipe and model, the recipe and the switch turned off."""
+    from palpation.model.recipe import switch_off
+
+    data = [f"data.{k}={v}" for k, v in train_data(wildcards).items()]
+    sizes = (RECIPE_ABL["sizes"].get(wildcards.recipe) or {}).get(EXPERIMENTS[wildcards.exp].model) or {}
+    knobs = [f"train.{k}={v}" for k, v in sizes.items() if v is not None]
+    off = [] if wildcards.switch == "none" else switch_off(wildcards.switch)
+    return " ".join(data + knobs + [f"recipe={wildcards.recipe}"] + off)
+
+
+def recipe_runs(name):
+    """`name` of every run the recipe report reads: both full recipes, robust minus each switch."""
+    groups = [(r, "none") for r in ("reference", "robust")] + [("robust", s) for s in RECIPE_ABL["switches"]]
+    return [f for recipe, switch in groups
+            for f in expand(f"{RECIPE_RUN}/{name}", recipe=recipe, switch=switch, exp=RECIPE_ABL["experiments"],
+                            clip_len=TRAIN["clip_len"], seed=RECIPE_ABL["seeds"])]
 
 
 def sweep_runs(name):

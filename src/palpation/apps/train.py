@@ -20,7 +20,8 @@ from palpation.model.job import TrainJob, run_job
 
 log = logging.getLogger(__name__)
 RECIPE_KEYS = ("lr", "weight_decay", "focal_gamma", "norm_stats", "norm_clips", "rotation", "schedule",
-               "step_size", "step_gamma")
+               "step_size", "step_gamma", "jitter_px", "marker_dropout", "displacement_scale", "patience",
+               "select_metric", "calibration")
 
 
 def job_from_config(cfg: DictConfig) -> TrainJob:
@@ -48,7 +49,8 @@ def run(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
     params = OmegaConf.to_container(cfg, resolve=True)
     params.pop("hydra", None)
     params["recipe"].pop("sizes", None)  # the chosen sizes are in train.*
-    return run_job(job, out_dir, params=params, track=bool(cfg.tracking), tags=_overrides(),
+    tags = {**_overrides(), "recipe": str(cfg.recipe.name)}  # MLflow tags only; outputs do not carry them
+    return run_job(job, out_dir, params=params, track=bool(cfg.tracking), tags=tags,
                    progress=bool(cfg.progress))
 
 

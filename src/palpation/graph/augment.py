@@ -59,3 +59,37 @@ def draw_rotations(rng: np.random.Generator, n: int, mode: str) -> np.ndarray:
     if mode == "none":
         return np.zeros(n, dtype=np.int64)
     return rng.integers(0, N_ROTATIONS, size=n)
+
+
+# ---- sensor-plausible augmentation of the robust recipe (issue 15); each is off at 0 ----
+# Sizes are the detector's measured ones: photo noise < 0.2 px per coordinate (SPEC §13.2); the Silicone
+# tracker fills or mask-fits ~0.8 % of marker-frames (results/data/silicone/silicone.json summary).
+
+def jitter_markers(markers: np.ndarray, rng: np.random.Generator, std_px: float) -> np.ndarray:
+    """Gaussian detector noise, independent per marker, frame and coordinate."""
+    if std_px <= 0:
+        return markers
+    return (markers + rng.normal(0.0, std_px, markers.shape)).astype(np.float32)
+
+
+def drop_markers(markers: np.ndarray, rng: np.random.Generator, rate: float) -> np.ndarray:
+    """Missed detections: a dropped marker keeps its previous frame's position, as a tracker holds it.
+
+    markers (B, L, 127, 2); frame 0 is never dropped (it has no previous frame). Drops chain, so a
+    marker missed twice in a row holds the last detected position."""
+    if rate <= 0:
+        return markers
+    out = np.array(markers, np.float32, copy=True)
+    drop = rng.random(out.shape[:3]) < rate
+    for t in range(1, out.shape[1]):
+        out[:, t][drop[:, t]] = out[:, t - 1][drop[:, t]]
+    return out
+
+
+def draw_displacement_scales(rng: np.random.Generator, n: int, spread: float) -> np.ndarray | None:
+    """One displacement-magnitude factor per clip, U(1 - spread, 1 + spread); None when off."""
+    if spread <= 0:
+        return None
+    if spread >= 1:
+        raise ValueError(f"displacement_scale must be in [0, 1) (factor U(1-s, 1+s)), got {spread}")
+    return rng.uniform(1.0 - spread, 1.0 + spread, size=n)

@@ -43,6 +43,7 @@ class ClipSet:
             raise ValueError(f"{seqs.name}: no window of {clip_len} frames at stride {seqs.stride} fits in "
                              f"sequences of {sorted({len(m) for m in seqs.markers})} frames")
         self.windows = np.array(rows, dtype=np.int64)  # (N, 2): sequence index, start frame
+        self.rest = np.asarray(rest, np.float32)
         self._perms = rotation_permutations(rest)
 
     def __len__(self) -> int:
@@ -57,18 +58,22 @@ class ClipSet:
         return np.clip(f, 0, len(self.seqs.markers[seq]) - 1)  # only `centred` windows reach past an end
 
     def gather(self, idx: np.ndarray, rotations: np.ndarray | None = None,
-               consistent: bool = False) -> tuple[np.ndarray, np.ndarray]:
+               consistent: bool = False, scales: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Clips `idx` -> markers (B, L, 127, 2) float32 px and labels (B, L, 127) int8.
 
         rotations: index 0..5 per clip (x 60 deg) or None. Sim labels are computed after rotating.
         consistent: renumber nodes so each sits at its rest site (quirk 14 fixed).
+        scales: displacement-magnitude factor per clip or None: markers = rest + s (markers - rest),
+        before the rotation, so Sim labels follow the scaled markers (a softer or deeper press).
         """
         idx = np.asarray(idx, dtype=np.int64)
         rot = np.zeros(len(idx), np.int64) if rotations is None else np.asarray(rotations, np.int64)
         markers, labels = [], []
-        for (seq, start), r in zip(self.windows[idx], rot):
+        for k, ((seq, start), r) in enumerate(zip(self.windows[idx], rot)):
             f = self.frames(seq, start)
             m = self.seqs.markers[seq][f]
+            if scales is not None:
+                m = (self.rest + scales[k] * (m - self.rest)).astype(np.float32)
             if self.seqs.labels is not None:
                 lab = self.seqs.labels[seq][f]
                 if r:

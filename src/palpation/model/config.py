@@ -33,6 +33,10 @@ class ModelConfig:
                              f"encoder_width + type_dim ({self.encoder_width} + {self.type_dim})")
 
 
+SELECT_METRICS = ("fg_iou", "ap")
+CALIBRATIONS = ("none", "temperature", "platt")
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     """One training run (SPEC §10). `None` batches mean the whole split."""
@@ -50,6 +54,13 @@ class TrainConfig:
     schedule: str = "none"  # none | step (StepLR(step_size, gamma), quirk 8)
     step_size: int = 64
     step_gamma: float = 0.5
+    # robust-recipe switches (issue 15); the defaults are the reference recipe's (all off)
+    jitter_px: float = 0.0  # Gaussian marker noise per coordinate, px (detector: < 0.2 px)
+    marker_dropout: float = 0.0  # share of marker-frames held at the previous frame (missed detection)
+    displacement_scale: float = 0.0  # per-clip displacement factor U(1 - s, 1 + s) about the rest layout
+    patience: int | None = None  # early stopping: epochs without a better validation score; None = off
+    select_metric: str = "fg_iou"  # validation score for checkpointing: fg_iou (at threshold) | ap
+    calibration: str = "none"  # post-hoc, fitted on the validation split: none | temperature | platt
     threshold: float = 0.5
     device: str = "cpu"
 
@@ -58,6 +69,15 @@ class TrainConfig:
             raise ValueError(f"norm_stats must be 'sample' or 'full', got '{self.norm_stats}'")
         if self.schedule not in ("none", "step"):
             raise ValueError(f"schedule must be 'none' or 'step', got '{self.schedule}'")
+        if self.select_metric not in SELECT_METRICS:
+            raise ValueError(f"select_metric must be one of {SELECT_METRICS}, got '{self.select_metric}'")
+        if self.calibration not in CALIBRATIONS:
+            raise ValueError(f"calibration must be one of {CALIBRATIONS}, got '{self.calibration}'")
+        if self.jitter_px < 0 or not 0 <= self.marker_dropout < 1 or not 0 <= self.displacement_scale < 1:
+            raise ValueError("jitter_px must be >= 0, marker_dropout and displacement_scale in [0, 1); got "
+                             f"{self.jitter_px}, {self.marker_dropout}, {self.displacement_scale}")
+        if self.patience is not None and self.patience < 1:
+            raise ValueError(f"patience must be >= 1 epoch or null (off), got {self.patience}")
         if self.batch_size < 1 or self.epochs < 1:
             raise ValueError(f"batch_size and epochs must be >= 1, got {self.batch_size}, {self.epochs}")
 
@@ -93,6 +113,12 @@ class RecipeSchema:
     schedule: str = MISSING
     step_size: int = MISSING
     step_gamma: float = MISSING
+    jitter_px: float = MISSING
+    marker_dropout: float = MISSING
+    displacement_scale: float = MISSING
+    patience: Optional[int] = MISSING
+    select_metric: str = MISSING
+    calibration: str = MISSING
     sizes: Dict[str, SizesSchema] = MISSING
 
 

@@ -17,8 +17,9 @@ from typing import Callable
 
 import numpy as np
 import torch
+from sklearn.metrics import average_precision_score
 
-from palpation.graph.augment import draw_rotations
+from palpation.graph.augment import draw_displacement_scales, draw_rotations, drop_markers, jitter_markers
 from palpation.graph.batch import make_batch
 from palpation.graph.clips import ClipSet
 from palpation.graph.edges import ClipTopology
@@ -85,12 +86,29 @@ def val_fg_iou(probs: np.ndarray, labels: np.ndarray, threshold: float) -> float
     return iou(probs >= threshold, labels.astype(bool))
 
 
+def val_score(probs: np.ndarray, labels: np.ndarray, cfg: TrainConfig) -> float:
+    """The checkpoint score: val FG IoU at the threshold (reference) or AP (0 without positives)."""
+    if cfg.select_metric == "fg_iou":
+        return val_fg_iou(probs, labels, cfg.threshold)
+    return float(average_precision_score(labels, probs)) if labels.any() else 0.0
+
+
+def training_batch(train: ClipSet, idx: np.ndarray, cfg: TrainConfig, rng: np.random.Generator):
+    """Markers and labels of one augmented training batch. Draw order: rotations (the reference's only
+    draw), then only the switches that are on, so the reference stream is untouched."""
+    rot = draw_rotations(rng, len(idx), cfg.rotation)
+    scales = draw_displacement_scales(rng, len(idx), cfg.displacement_scale)
+    m, lab = train.gather(idx, rot, cfg.rotation == "consistent", scales)
+    m = drop_markers(jitter_markers(m, rng, cfg.jitter_px), rng, cfg.marker_dropout)
+    return m, lab
+
+
 @dataclass
 class FitResult:
     model: STGNN
     stats: NormStats
     best_epoch: int
-    best_val_fg_iou: float
+    best_val_score: float  # cfg.select_metric at best_epoch (val FG IoU in the reference recipe)
     history: list = field(default_factory=list)  # per-epoch dicts
     train_seconds: float = 0.0
 
@@ -120,7 +138,7 @@ def fit(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology, mode
         losses = []
         for b in range(n_batches):
             idx = order[b * cfg.batch_size:(b + 1) * cfg.batch_size]
-            m, lab = train.gather(idx, draw_rotations(rng, len(idx), cfg.rotation), cfg.rotation == "consistent")
+            m, lab = training_batch(train, idx, cfg, rng)
             batch = make_batch(m, lab, rest, topo, stats, cfg.device)
             loss = focal_loss(model(batch), batch.y, stats.alpha, cfg.focal_gamma)  # every frame
             opt.zero_grad()
@@ -136,17 +154,23 @@ def fit(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology, mode
         if sched:
             sched.step()
         probs, labels = predict(model, val, stats, rest, topo, cfg.batch_size, cfg.val_batches, cfg.device)
-        score = val_fg_iou(probs, labels, cfg.threshold)
+        score = val_score(probs, labels, cfg)
         c = confusion(probs, labels, cfg.threshold)
-        row = {"epoch": epoch, "train/loss": float(np.mean(losses)), "val/fg_iou": score,
-               "val/tp": c["tp"], "val/fp": c["fp"]}
+        row = {"epoch": epoch, "train/loss": float(np.mean(losses)),
+               "val/fg_iou": val_fg_iou(probs, labels, cfg.threshold), "val/tp": c["tp"], "val/fp": c["fp"]}
+        if cfg.select_metric != "fg_iou":
+            row[f"val/{cfg.select_metric}"] = score
         history.append(row)
-        log.info("epoch %d: loss %.5f val FG IoU %.4f", epoch, row["train/loss"], score)
+        log.info("epoch %d: loss %.5f val %s %.4f", epoch, row["train/loss"], cfg.select_metric, score)
         if log_metrics:
             log_metrics({k: v for k, v in row.items() if k != "epoch"}, step)
         if score > best:  # strict, as Lightning's ModelCheckpoint in max mode
             best, best_epoch = score, epoch
             best_state = copy.deepcopy(model.state_dict())
+        elif cfg.patience and epoch - best_epoch >= cfg.patience:  # early stopping on the val split
+            log.info("early stop after epoch %d: no better val %s for %d epochs", epoch, cfg.select_metric,
+                     cfg.patience)
+            break
     steps.close()
     model.load_state_dict(best_state)
     model.eval()

@@ -45,6 +45,9 @@ SOURCES = {
     "twin_ablation": Source("train/report/twin_ablation.csv",
                             ("dataset_twin", "experiment", "n_seeds", "auroc_mean", "auroc_std", "ap_mean", "ap_std",
                              "fg_iou_mean", "bg_iou_mean"), "of the twin ablation (TWIN_ABLATION_FILES)"),
+    "recipe_ablation": Source("recipe/report/recipe_ablation.csv",
+                              ("config", "recipe", "switch_off", "seeds", "auroc_mean", "auroc_std", "ap_mean", "ap_std",
+                               "pos_share_05", "ece", "d_bar_mm"), "recipe_report"),
 }
 
 TITLES = {
@@ -56,6 +59,7 @@ TITLES = {
     "table4_markers": "Table 4, upper half: per marker",
     "table4_maps": "Table 4, lower half: vessel maps",
     "twin_ablation": "Twin ablation: which twin made the Sim set",
+    "recipe_ablation": "Training recipe: reference vs robust (issue 15)",
 }
 
 

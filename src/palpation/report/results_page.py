@@ -22,9 +22,11 @@ from palpation.io import save_text
 from palpation.report import page_training as training
 from palpation.report import page_twin as twin
 from palpation.report.compare import SOURCES, TITLES, Section, read_json, read_table
+from palpation.report.page_recipe import recipe_ablation_section
 from palpation.report.markdown import markdown
 
-ORDER = ("data", "calibration", "loop", "seed_sweep", "table3", "table4_markers", "table4_maps", "twin_ablation")
+ORDER = ("data", "calibration", "loop", "seed_sweep", "table3", "table4_markers", "table4_maps", "twin_ablation",
+         "recipe_ablation")
 FIGURES = (  # (caption, path under the results root; a glob lists every match)
     ("Fig. 4: fitted twin vs the photos", "calibration/fig4.png"),
     ("Fig. 4 at the paper's parameters", "calibration/fig4_paper.png"),
@@ -39,6 +41,8 @@ FIGURES = (  # (caption, path under the results root; a glob lists every match)
     ("Silicone set", "data/silicone/silicone_overview.png"),
     ("Meat set", "data/meat/meat_overview.png"),
     ("Twin renders", "twin/render/markers.png"),
+    ("Reliability of the test scores, reference vs robust recipe", "recipe/report/reliability.png"),
+    ("Seed-ensemble vessel maps: mean, spread, unsure pixels, coverage-precision", "recipe/report/uncertainty_maps.png"),
 )
 WHEN_KEYS = {"configs", "metrics", "direction", "profiles"}
 DIRECTIONS = {"below": -1, "above": 1, "off": 0}
@@ -147,6 +151,7 @@ def sections(root: Path, k: float = 2.0) -> dict[str, Section | None]:
         "table4_maps": lambda: training.table4_maps_section(t["table4_maps"], t["maps_photo"],
                                                     read_json(root / "maps" / "silicone_pose_check.json")),
         "twin_ablation": lambda: training.twin_ablation_section(t["twin_ablation"], k),
+        "recipe_ablation": lambda: recipe_ablation_section(t["recipe_ablation"]),
     }
     return {key: build[key]() if t[key] is not None else None for key in ORDER}
 

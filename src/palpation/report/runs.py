@@ -32,3 +32,8 @@ def load_runs(root: str | Path, configs, clip_lens, seeds) -> list[dict]:
                                 "train rule (snakemake) or palpation.apps.train for them first")
     return runs
 
+
+
+def recipe_root(root: str | Path, recipe: str, switch_off: str) -> Path:
+    """Runs of the recipe ablation (issue 15): <root>/<recipe>/<switch_off>/, then the run_dir layout."""
+    return Path(root) / recipe / switch_off

@@ -120,3 +120,28 @@ def table4_maps_markdown(df: pd.DataFrame, profile: str, notes: list[str] | None
     if notes:
         text += "\n" + "\n".join(f"* {n}" for n in notes) + "\n"
     return text
+
+
+# ---- issue 15: the recipe ablation and the ensemble's coverage-precision (docs/results/*.csv) ----
+RECIPE_ABLATION_COLUMNS = ("config", "recipe", "switch_off", "seeds", "auroc_mean", "auroc_std", "ap_mean", "ap_std",
+                           "pos_share_05", "ece", "d_bar_mm")
+UNCERTAINTY_COLUMNS = ("config", "coverage", "precision", "recall")
+
+
+def recipe_ablation(rows: list[dict]) -> pd.DataFrame:
+    return pd.DataFrame([{k: r[k] for k in RECIPE_ABLATION_COLUMNS} for r in rows], columns=list(RECIPE_ABLATION_COLUMNS))
+
+
+def uncertainty_table(rows: list[dict]) -> pd.DataFrame:
+    return pd.DataFrame([{k: r[k] for k in UNCERTAINTY_COLUMNS} for r in rows], columns=list(UNCERTAINTY_COLUMNS))
+
+
+def recipe_ablation_markdown(df: pd.DataFrame, profile: str, notes: list[str] | None = None) -> str:
+    rows = [[f"{r['config']} ({CONFIG_TITLES.get(r['config'], r['config'])})", r["recipe"], r["switch_off"],
+             str(int(r["seeds"])), f"{num(r['auroc_mean'])} ± {num(r['auroc_std'])}",
+             f"{num(r['ap_mean'])} ± {num(r['ap_std'])}", f"{100 * r['pos_share_05']:.1f} %", num(r["ece"]),
+             num(r["d_bar_mm"], 2)] for _, r in df.iterrows()]
+    text = (f"# Training recipe ablation ({profile} profile): mean ± sample std over seeds\n\n"
+            + markdown(["Config", "Recipe", "Switch off", "Seeds", "AUROC", "AP", "Positive at 0.5", "ECE",
+                        "d̄ (mm)"], rows))
+    return text + "".join(f"\n* {n}" for n in notes or []) + ("\n" if notes else "")

@@ -1,0 +1,53 @@
+"""Calibration on toy sets with known miscalibration (issue 15)."""
+
+import numpy as np
+import pytest
+
+from palpation.metrics.calibration import Calibrator, ece, fit_calibrator, logit, positive_share, reliability
+
+
+@pytest.fixture(scope="module")
+def toy():
+    """True logit z; the 'model' reports sigmoid(3 z + 4): overconfident and shifted toward positive."""
+    rng = np.random.default_rng(0)
+    z = rng.normal(-2.0, 2.0, 40_000)
+    y = (rng.random(z.size) < 1 / (1 + np.exp(-z))).astype(np.int8)
+    return 1 / (1 + np.exp(-(3 * z + 4))), y, 1 / (1 + np.exp(-z))
+
+
+def test_platt_recovers_the_known_distortion(toy):
+    over, y, true = toy
+    cal = fit_calibrator(over[::2], y[::2], "platt")  # fit on one half, measure on the other
+    assert cal.scale == pytest.approx(1 / 3, rel=0.05) and cal.shift == pytest.approx(-4 / 3, rel=0.05)
+    assert ece(over[1::2], y[1::2]) > 0.15 and ece(cal.apply(over[1::2]), y[1::2]) < 0.015
+    assert positive_share(cal.apply(over)) == pytest.approx(positive_share(true), abs=0.01)
+
+
+def test_temperature_fixes_pure_overconfidence_and_keeps_the_ranking():
+    rng = np.random.default_rng(1)
+    z = rng.normal(0.0, 1.5, 40_000)
+    y = (rng.random(z.size) < 1 / (1 + np.exp(-z))).astype(np.int8)
+    over = 1 / (1 + np.exp(-4 * z))  # temperature 1/4
+    cal = fit_calibrator(over, y, "temperature")
+    assert cal.scale == pytest.approx(0.25, rel=0.05) and cal.shift == 0.0
+    assert ece(over, y) > 0.08 and ece(cal.apply(over), y) < 0.01
+    order = np.argsort(over, kind="stable")
+    assert np.all(np.diff(cal.apply(over)[order]) >= 0)  # monotone: AUROC and AP are unchanged
+
+
+def test_ece_and_reliability_on_known_bins():
+    probs = np.array([0.05, 0.05, 0.95, 0.95])
+    labels = np.array([0, 0, 1, 0])
+    r = reliability(probs, labels, n_bins=10)
+    assert r["count"].tolist() == [2, 0, 0, 0, 0, 0, 0, 0, 0, 2]
+    assert ece(probs, labels, n_bins=10) == pytest.approx(0.5 * 0.05 + 0.5 * 0.45)
+    assert ece(np.full(4, 0.5), np.array([0, 1, 0, 1])) == 0.0  # calibrated on average
+
+
+def test_identity_and_errors():
+    p = np.array([0.2, 0.7], np.float32)
+    assert np.array_equal(Calibrator().apply(p), p) and np.allclose(logit([0.5]), 0.0)
+    with pytest.raises(ValueError, match="both classes"):
+        fit_calibrator(p, np.zeros(2), "platt")
+    with pytest.raises(ValueError, match="unknown calibration"):
+        fit_calibrator(p, np.array([0, 1]), "isotonic")
