@@ -10,8 +10,7 @@ from omegaconf import OmegaConf, open_dict
 from palpation.config_check import ConfigKeyError, app_main, check_config
 from palpation.paths import REPO_ROOT
 
-APPS = ("calibrate", "data_summary", "loop", "meat", "mesh", "photos", "results_page", "silicone", "train_tables",
-        "simulate", "train", "twin_ablation", "vessel_maps")
+APPS = tuple(sorted(p.stem for p in (REPO_ROOT / "conf").glob("*.yaml")))  # every app has conf/<app>.yaml
 
 
 @pytest.fixture
