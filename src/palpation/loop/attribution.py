@@ -101,7 +101,7 @@ def joint_candidates(residual: np.ndarray, signatures: list[Signature], conditio
                      requires: dict[str, tuple[str, ...]], pool: list[str], min_rms_px: float = 0.02) -> list[dict]:
     """Effect pairs to try jointly when single effects fail, best (lowest BIC) first.
 
-    * dependent pairs: an effect that acts only through another (friction, mount need surface contact) is
+    * dependent pairs: an effect that acts only through another (friction needs surface contact) is
       fitted with its `conditional` columns (its signature at the twin with the provider's nominal step on)
       next to the provider's own columns: alone its signature is dead;
     * independent pairs: any two live effects of `pool` (the BIC-best subset and the top of the ranking).

@@ -1,8 +1,8 @@
 """Self-test: measured-like sets made by the twin with hidden effects, then the loop on each, as in real use.
 
 Every run starts from the same twin as the real mode (no contact; `base_effects` on, none by default)
-and injects one *case*: a single effect, a dependent pair (friction or a mount offset with the surface
-contact they act through), a pair of independent effects, or an effect outside the candidate list
+and injects one *case*: a single effect, a dependent pair (friction with the surface contact it acts
+through), a pair of independent effects, or an effect outside the candidate list
 (`unlisted:<name>`: an image-space barrel distortion the camera similarity cannot express, and a skin
 defect that displaces a patch of markers), alone or with in-list ones. Strength per injected effect:
 s in [strength_low, strength_high] nominal steps (stratified over the case's runs; a multi-dof effect

@@ -131,8 +131,9 @@ def loop(df: pd.DataFrame, per_state: pd.DataFrame | None = None) -> Section:
     first, last = df.iloc[0], df.iloc[-1]
     paper_px = sum(v["twin"] for v in CALIBRATION_MAE.values()) / len(CALIBRATION_MAE)
     paper_mm, final_mm = paper_px * MM_PER_PX, float(last["mae_mean_mm"])
-    body = ("The rounds the loop kept: each adds the effect that explains most of the remaining residual, kept "
-            "only if the held-out photo improves (rejected candidates: `loop/report.md`). The paper has no loop; "
+    body = ("The rounds the loop kept: each adds the effect (or effect pair) that explains most of the remaining "
+            "residual, kept only if the gate accepts it: the held-out change weighed against its own noise "
+            "(rejected tries: `loop/tables/tries.csv`; verdict: `loop/report.md`). The paper has no loop; "
             "it stops at the calibrated twin, so the comparison is with that twin's MAE (SPEC §15.8).\n\n"
             + markdown(["round", "effect added", "MAE fit px", "MAE held-out px", "mean mm", "mean px"], rows)
             + f"\nFinal twin vs the paper's twin: {final_mm:.3f} mm ({final_mm / MM_PER_PX:.2f} px) vs "
