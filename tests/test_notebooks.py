@@ -25,6 +25,7 @@ def small_results(tmp_path, monkeypatch):
     """A results folder with a few stages done and an MLflow store holding one superseded rerun."""
     results = tmp_path / "results"
     monkeypatch.setenv("PALPATION_RESULTS", str(results))
+    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)  # mlflow.set_tracking_uri of earlier tests sets it
     (results / "data" / "silicone").mkdir(parents=True)
     (results / "data" / "summary.csv").write_text("dataset,trials,frames\nsilicone,10,160\n")
     (results / "data" / "silicone" / "label_agreement.json").write_text(json.dumps(

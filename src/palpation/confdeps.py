@@ -40,6 +40,8 @@ def conf_files(app: str, choices: Mapping[str, str | None] | None = None,
                 else:
                     sub = key.lstrip("/") if key.startswith("/") or not group else f"{group}/{key}"
                 option = choices.get(sub, option)
+                if sub.split("/")[0] == "hydra":  # Hydra's own settings (help text, logging) change no output
+                    continue
                 if option is not None:
                     visit(conf_dir / sub / f"{option}.yaml", sub)
 

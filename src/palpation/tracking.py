@@ -128,6 +128,17 @@ def supersede(client: Any, experiment_id: str, key: str, new_run_id: str) -> lis
 _work_started: float | None = None
 
 
+def _use_store(uri: str) -> None:
+    """mlflow.set_tracking_uri, without the MLFLOW_TRACKING_URI it exports: a later run of this process
+    with another results folder must not inherit the store as if the user had set it."""
+    import mlflow
+
+    user = os.environ.get("MLFLOW_TRACKING_URI")
+    mlflow.set_tracking_uri(uri)
+    if user is None:
+        os.environ.pop("MLFLOW_TRACKING_URI", None)
+
+
 def mark_work_start() -> None:
     """Called by `config_check.app_main` before an app's work: the app's run starts here, even when
     the app opens it after the work (a run then spans what it tracks, not the last 50 ms)."""
@@ -180,7 +191,7 @@ def start_run(stage: str, params: Mapping[str, Any] | None = None, config: str |
     where = _sweep_tags()
     experiment_label = experiment_name(stage, where)
     with FileLock(str(lock), timeout=120):
-        mlflow.set_tracking_uri(uri)
+        _use_store(uri)
         if mlflow.get_experiment_by_name(experiment_label) is None:
             # artefacts beside the store, not in ./mlruns of whatever folder the job started in; the
             # kind tag makes MLflow 3's UI open the runs view instead of the GenAI traces page
