@@ -11,7 +11,7 @@ from palpation.paths import REPO_ROOT
 CONFIGS = ["A-to-A", "A-to-B", "A-to-C", "C-to-B"]
 
 
-def test_train_tables_and_figure(tmp_path, fake_run):
+def test_train_tables_and_figure(tmp_path, fake_run, results_tmp):
     root, out = tmp_path / "train", tmp_path / "report"
     for c in CONFIGS:
         for s in (0, 1):
@@ -24,6 +24,7 @@ def test_train_tables_and_figure(tmp_path, fake_run):
             f"runs_root={root}", f"out_dir={out}", "seeds=[0,1]", "profile=quick",
             "ablation.clip_lens=[1,3,5]", "ablation.seeds=[0,1]"])
     assert run(cfg) == {"runs": 8, "ablation_runs": 6}
+    assert list((results_tmp / "mlartifacts" / "train_tables").rglob("fig6_pr_curves.png"))  # Fig. 6 in MLflow
 
     sweep = pd.read_csv(out / "seed_sweep.csv")
     assert list(sweep.columns) == ["config", "seed", "auroc", "ap", "fg_iou", "bg_iou", "mcc", "f1",

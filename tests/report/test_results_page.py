@@ -189,7 +189,7 @@ def test_write_is_atomic(tmp_path, monkeypatch):
     assert [p.name for p in tmp_path.iterdir()] == ["README.md"]  # no temp file left behind
 
 
-def test_app_writes_the_page_and_links_relative_to_it(tmp_path):
+def test_app_writes_the_page_and_links_relative_to_it(tmp_path, results_tmp):
     root = fake_results(tmp_path / "results")
     out = tmp_path / "docs" / "results.md"
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
@@ -198,6 +198,7 @@ def test_app_writes_the_page_and_links_relative_to_it(tmp_path):
     assert result["out"] == str(out) and result["sections"]["seed_sweep"] and not result["sections"]["twin_ablation"]
     assert "[Fig. 4: fitted twin vs the photos](../results/calibration/fig4.png)" in out.read_text()
     assert not (root / "README.md").exists()  # the root is only read
+    assert list((results_tmp / "mlartifacts" / "results_page").rglob("results.md"))  # the page is the run's artefact
 
 
 def test_app_help():
