@@ -150,9 +150,10 @@ def _track(c: dict, rows: list[dict], out: Path) -> None:
             key = f"{r['config']}/{r['recipe']}/{r['switch_off']}"
             tracking.log_metrics({f"{key}/{k}": r[k] for k in ("auroc_mean", "ap_mean", "ap_std", "pos_share_05",
                                                                 "ece", "d_bar_mm") if r[k] == r[k]})
-        for name in ("recipe_ablation.csv", "recipe_ablation.md", "uncertainty.csv", "reliability.png",
-                     "uncertainty_maps.png", "recipe_report.json"):
+        for name in ("recipe_ablation.csv", "recipe_ablation.md", "uncertainty.csv", "recipe_report.json"):
             tracking.log_artifact(out / name)
+        for stem in ("reliability", "uncertainty_maps"):
+            tracking.log_figure(out / stem)
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="recipe_report")
