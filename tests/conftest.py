@@ -30,3 +30,15 @@ def real_sets(tmp_path_factory):
                         "track=false", f"hydra.run.dir={path.parent}"], cwd=REPO_ROOT, check=True,
                        capture_output=True, timeout=600)
     return paths
+
+
+@pytest.fixture(scope="session")
+def train_sets(tmp_path_factory):
+    """Small synthetic Sim, Silicone and Meat sets (paths by name) for the training app's tests."""
+    from palpation.graph.layout import rest_layout
+    from palpation.graph.synthetic import write_meat, write_silicone, write_sim
+
+    root, rest = tmp_path_factory.mktemp("train_sets"), rest_layout("ideal")
+    return {"sim": str(write_sim(root / "sim", rest, n_traj=7, n_frames=72)),
+            "silicone": str(write_silicone(root / "silicone.npz", rest, n_videos=2, n_frames=8)),
+            "meat": str(write_meat(root / "meat.npz", rest, n_frames=(9,) * 5, n_val=2))}

@@ -10,21 +10,11 @@ import pytest
 from hydra import compose, initialize_config_dir
 
 from palpation.apps.train import job_from_config, run
-from palpation.graph.layout import rest_layout
-from palpation.graph.synthetic import write_meat, write_silicone, write_sim
 from palpation.paths import REPO_ROOT
 
 CONF = str(REPO_ROOT / "conf")
 TINY = ["graph.rest=ideal", "train.batch_size=4", "train.epochs=1", "train.train_batches=2",
         "train.val_batches=1"]
-
-
-@pytest.fixture(scope="module")
-def data(tmp_path_factory):
-    root, rest = tmp_path_factory.mktemp("data"), rest_layout("ideal")
-    return {"sim": str(write_sim(root / "sim", rest, n_traj=7, n_frames=72)),
-            "silicone": str(write_silicone(root / "silicone.npz", rest, n_videos=2, n_frames=8)),
-            "meat": str(write_meat(root / "meat.npz", rest, n_frames=(9,) * 5, n_val=2))}
 
 
 def compose_train(overrides):
@@ -49,9 +39,9 @@ def test_experiments_compose(exp, model, train_on, test_on, sizes):
     assert better.norm_stats == "full"
 
 
-def test_train_run_writes_outputs_and_mlflow(data, tmp_path, results_tmp, monkeypatch):
+def test_train_run_writes_outputs_and_mlflow(train_sets, tmp_path, results_tmp, monkeypatch):
     monkeypatch.chdir(tmp_path)  # MLflow's SQLite store puts artefacts in ./mlruns of the cwd
-    paths = [f"data.{k}={v}" for k, v in data.items()]
+    paths = [f"data.{k}={v}" for k, v in train_sets.items()]
     cfg = compose_train(["experiment=A-to-B", "model=compact", "seed=0", "clip_len=3", *TINY, *paths])
     metrics = run(cfg, tmp_path / "run")
     out = tmp_path / "run"
@@ -74,8 +64,8 @@ def test_train_run_writes_outputs_and_mlflow(data, tmp_path, results_tmp, monkey
     assert {"scores.npz", "pr.npz", "checkpoint.pt", "metrics.json"} <= arts
 
 
-def test_multirun_seeds_and_clip_lens(data, tmp_path):
-    paths = [f"data.{k}={v}" for k, v in data.items()]
+def test_multirun_seeds_and_clip_lens(train_sets, tmp_path):
+    paths = [f"data.{k}={v}" for k, v in train_sets.items()]
     cmd = [sys.executable, "-m", "palpation.apps.train", "--multirun", "experiment=C-to-B", "seed=0,1",
            "clip_len=1,3", "tracking=false", *TINY, *paths, f"hydra.sweep.dir={tmp_path}"]
     env = {**os.environ, "PALPATION_RESULTS": str(tmp_path / "results")}

@@ -109,24 +109,14 @@ def test_recipes_compose_and_switch_off_restores_one_reference_value():
         assert all(getattr(off, k) == getattr(ref, k) for k in SWITCHES[name])
 
 
-@pytest.fixture(scope="module")
-def data(tmp_path_factory):
-    from palpation.graph.synthetic import write_silicone
-
-    root, rest = tmp_path_factory.mktemp("data"), rest_layout("ideal")
-    return {"sim": str(write_sim(root / "sim", rest, n_traj=7, n_frames=72)),
-            "silicone": str(write_silicone(root / "silicone.npz", rest, n_videos=2, n_frames=8)),
-            "meat": str(write_meat(root / "meat.npz", rest, n_frames=(9,) * 5, n_val=2))}
-
-
-def test_calibration_rescales_the_written_scores_only(data, tmp_path):
+def test_calibration_rescales_the_written_scores_only(train_sets, tmp_path):
     """calibration=platt: the same model (checkpoint bytes), scores = the fitted map of the raw ones."""
     from palpation.apps.train import run
     from palpation.metrics.calibration import Calibrator
 
     base = ["experiment=C-to-B", "seed=0", "clip_len=3", "graph.rest=ideal", "train.batch_size=4", "train.epochs=1",
             "train.train_batches=2", "train.val_batches=2", "tracking=false", "progress=false",
-            *[f"data.{k}={v}" for k, v in data.items()]]
+            *[f"data.{k}={v}" for k, v in train_sets.items()]]
     out = {}
     for cal in ("none", "platt"):
         with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
