@@ -274,3 +274,14 @@ def projected_node_area(mesh: SensorMesh) -> np.ndarray:
         cross_z = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])[:, 2]
         np.add.at(area, tri.ravel(), np.repeat(0.5 * np.abs(cross_z) / 3.0, 3))
     return area.astype(np.float32)
+
+
+def morton_order(points: np.ndarray, bits: int = 10) -> np.ndarray:
+    """Indices that sort 3-D points along a Morton (Z-order) curve of their bounding box."""
+    span = max(float((points.max(axis=0) - points.min(axis=0)).max()), 1e-30)
+    q = ((points - points.min(axis=0)) / span * (2**bits - 1)).astype(np.int64)
+    code = np.zeros(len(points), np.int64)
+    for b in range(bits):
+        for d in range(3):
+            code |= ((q[:, d] >> b) & 1) << (3 * b + d)
+    return np.argsort(code, kind="stable")

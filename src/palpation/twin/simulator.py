@@ -21,7 +21,7 @@ from palpation.twin.elasticity import (courant_dt, eval_elastic_forces, eval_ela
 from palpation.twin.integrate import (advance_frame, check_nodes, check_tets, integrate_contact_nodes,
                                       integrate_nodes, load_frame_poses, reset_velocities,
                                       set_control_velocity, snap_fixed_nodes)
-from palpation.twin.mesh import SensorMesh, build_vessel_points, projected_node_area, shell_weights
+from palpation.twin.mesh import SensorMesh, build_vessel_points, morton_order, projected_node_area, shell_weights
 from palpation.twin.warp_runtime import init_warp
 from palpation.twin.parameters import CONTACT_KEYS, ENV_KEYS, LAYERED_KEYS, by_env_key, per_env_keys
 
@@ -36,17 +36,6 @@ def resolve_device(name: str):
         log.warning("device %r requested but CUDA is not available: running on the CPU", name)
         name = "cpu"
     return wp.get_device(name)
-
-
-def morton_order(points: np.ndarray, bits: int = 10) -> np.ndarray:
-    """Indices that sort 3-D points along a Morton (Z-order) curve of their bounding box."""
-    span = max(float((points.max(axis=0) - points.min(axis=0)).max()), 1e-30)
-    q = ((points - points.min(axis=0)) / span * (2**bits - 1)).astype(np.int64)
-    code = np.zeros(len(points), np.int64)
-    for b in range(bits):
-        for d in range(3):
-            code |= ((q[:, d] >> b) & 1) << (3 * b + d)
-    return np.argsort(code, kind="stable")
 
 
 class BatchedTwin:
