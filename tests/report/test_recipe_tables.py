@@ -46,3 +46,27 @@ def test_figures_write_png_and_pdf(tmp_path, toy_map):
     curves = {"A-to-B/robust": toy_map.coverage_curve(1.0)}
     fig = uncertainty_figure({"A-to-B/robust": toy_map}, curves, "toy")
     assert all(f.stat().st_size > 0 for f in save_figure(fig, tmp_path / "uncertainty_maps"))
+
+
+def test_recipe_report_run_in_mlflow(tmp_path, results_tmp):
+    """The report's MLflow run: one name scheme, table metrics, tables and both figures as artefacts."""
+    import mlflow
+
+    from palpation import tracking
+    from palpation.apps.recipe_report import _track
+
+    for name in ("recipe_ablation.csv", "recipe_ablation.md", "uncertainty.csv", "recipe_report.json",
+                 "reliability.png", "reliability.pdf", "uncertainty_maps.png", "uncertainty_maps.pdf"):
+        (tmp_path / name).write_text("x")
+    c = {"profile": "quick", "experiments": ["A-to-B"], "recipes": ["robust"], "switches": [], "seeds": [0],
+         "clip_len": 5, "threshold": 0.5}
+    row = {"config": "A-to-B", "recipe": "robust", "switch_off": "none", "auroc_mean": 0.6, "ap_mean": 0.2,
+           "ap_std": 0.01, "pos_share_05": 0.1, "ece": 0.05, "d_bar_mm": float("nan")}
+    _track(c, [row], tmp_path)
+    [run] = mlflow.MlflowClient(tracking.tracking_uri()).search_runs(
+        [mlflow.get_experiment_by_name("recipe_report").experiment_id])
+    assert run.data.tags["mlflow.runName"] == "recipe_report/quick"
+    assert run.data.metrics["A-to-B/robust/none/ap_mean"] == 0.2
+    assert "A-to-B/robust/none/d_bar_mm" not in run.data.metrics  # NaN is not logged
+    stored = {p.name for p in (results_tmp / "mlartifacts" / "recipe_report").rglob("*.*")}
+    assert {"recipe_ablation.csv", "reliability.png", "uncertainty_maps.pdf"} <= stored

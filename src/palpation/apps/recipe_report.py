@@ -145,7 +145,7 @@ def run(cfg: DictConfig) -> dict:
 
 def _track(c: dict, rows: list[dict], out: Path) -> None:
     params = {k: c[k] for k in ("profile", "experiments", "recipes", "switches", "seeds", "clip_len", "threshold")}
-    with tracking.start_run("recipe_report", params, run_name=f"recipe_report-{c['profile']}"):
+    with tracking.start_run("recipe_report", params, config=c['profile']):
         for r in rows:
             key = f"{r['config']}/{r['recipe']}/{r['switch_off']}"
             tracking.log_metrics({f"{key}/{k}": r[k] for k in ("auroc_mean", "ap_mean", "ap_std", "pos_share_05",
