@@ -82,18 +82,25 @@ def initial_params(base: Mapping[str, float]) -> dict[str, float]:
     return {**{k: p.default for k, p in PARAMS.items()}, **dict(base)}
 
 
-def evaluate(problems: list[Problem], simulate) -> None:
-    """Simulate each problem's current twin at all its states (one batch)."""
+def evaluate(problems: list[Problem], simulate, strict: bool = True) -> dict[str, list[str]]:
+    """Simulate each problem's current twin at all its states (one batch).
+
+    A twin that diverges at a state raises; with `strict=False` it is returned instead ({problem: states})
+    and that problem's markers are left as they were (a recalibrated try is then refused, not the loop)."""
     jobs = [(t.state, p.params) for p in problems for t in p.targets]
     markers, failed = simulate(jobs)
-    i = 0
+    i, diverged = 0, {}
     for p in problems:
         n = len(p.targets)
-        if failed[i:i + n].any():
-            raise ValueError(f"loop '{p.name}': the current twin diverged at "
-                             f"{[t.name for t, f in zip(p.targets, failed[i:i + n]) if f]}; params {p.params}")
-        p.markers = markers[i:i + n]
+        bad = [t.name for t, f in zip(p.targets, failed[i:i + n]) if f]
+        if bad and strict:
+            raise ValueError(f"loop '{p.name}': the current twin diverged at {bad}; params {p.params}")
+        if bad:
+            diverged[p.name] = bad
+        else:
+            p.markers = markers[i:i + n]
         i += n
+    return diverged
 
 
 def refit_dofs(p: Problem) -> list[Dof]:
@@ -267,9 +274,18 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                                progress=progress)
             for p in trying:
                 p.params.update(fits[p.name]["params"])
-            evaluate(trying, simulate)
+            diverged = evaluate(trying, simulate, strict=False)
             for p in trying:
                 item, (b, b_params, b_markers, att, b_searched, _) = queue[p.name][attempt], before[p.name]
+                if p.name in diverged:  # the fit's optimum was found on the fitted states only
+                    why = f"the recalibrated twin diverged at {diverged[p.name]}"
+                    nan = float("nan")
+                    failed = {"fit": nan, "heldout": nan, "all": nan, "fit_result": fits[p.name], "gate": {"why": why}}
+                    p.rounds.append(_record(k, p, item, att, before[p.name], failed, False))
+                    log.info("loop '%s' round %d try %d: %s: %s; rejected", p.name, k, attempt + 1,
+                             "+".join(item["effects"]), why)
+                    p.params, p.markers, p.searched = dict(b_params), b_markers, list(b_searched)
+                    continue
                 a = p.summary()
                 held = [i for i, t in enumerate(p.targets) if not t.fit]
                 evidence = heldout_z([p.targets[i].markers for i in held], [b_markers[i] for i in held],
