@@ -61,6 +61,7 @@ rule render_twin:
     input:
         canonical=rules.simulate_canonical.output.manifest,
         slide=rules.simulate_vessel_slide.output.manifest,
+        conf=conf_files("render_twin"),
     output:
         png=report("results/twin/render/markers.png", caption="../report/twin_render.rst", category="Twin"),
         pdf="results/twin/render/markers.pdf",
@@ -72,14 +73,14 @@ rule render_twin:
         rule="render_twin",
         py=PY,
         outdir=lambda wildcards, output: Path(output.png).parent,
+        hydra=lambda wildcards, output: hydra_dir(output.png),
     log:
         "results/logs/twin/render_twin.log",
     conda:
         CONDA_ENV
     shell:
-        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.twin.render"
-        " --out {params.outdir} {input.canonical} {input.slide}"
-        " > {log} 2>&1"
+        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.render_twin"
+        " 'manifests=[{input.canonical},{input.slide}]' out.dir={params.outdir} {params.hydra} > {log} 2>&1"
 
 
 rule bench_twin:

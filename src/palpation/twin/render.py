@@ -5,15 +5,13 @@ each trajectory at its frame of largest mean marker displacement from rest (the 
 with displacements magnified; the videos show every recorded frame (slides every 2nd) with the
 projected vessel centreline while in contact and the positive markers of the 30 px label rule.
 
-    python -m palpation.twin.render --out results/twin/render results/twin/canonical/manifest.json ...
+Run it through the Hydra app `python -m palpation.apps.render_twin` (rule render_twin).
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import logging
-import sys
 from pathlib import Path
 
 import cv2
@@ -62,17 +60,3 @@ def render(manifests: list[Path], out_dir: Path) -> list[Path]:
         outputs.append(write_video(traj, out_dir / f"{path.parent.name}_{path.stem}.mp4", name))
         log.info("rendered %s (%d frames)", name, len(traj["markers"]))
     return outputs + markers_figure(panels, out_dir / "markers")
-
-
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("manifests", nargs="+", type=Path)
-    parser.add_argument("--out", type=Path, default=Path("results/twin/render"))
-    args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s %(name)s %(message)s")
-    for p in render(args.manifests, args.out):
-        log.info("wrote %s", p)
-
-
-if __name__ == "__main__":
-    main()
