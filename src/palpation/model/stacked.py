@@ -1,0 +1,223 @@
+"""Several seeds of one configuration trained together in one process (issue 17).
+
+The seeds' models are stacked (`torch.func.stack_module_state`) and every training step is one
+vmapped `functional_call` over the stack, so a GPU runs S small models as one set of kernels instead
+of S processes taking turns. Everything that makes a seed a seed stays its own, drawn exactly as
+`train.fit` draws it: normalisation clips, epoch orders and augmentation (its numpy stream), the
+initial weights (torch seeded with the seed), the dropout masks (its own generator, in the forward's
+order), the Adam moments (elementwise, so one Adam over stacked tensors is S Adams), early stopping
+and the best-validation checkpoint. Validation scores each seed's model unbatched with `predict`.
+
+How close to separate runs: on the CPU the draws are bit-identical (dropout masks are made as
+`F.dropout` makes them: `bernoulli_(1 - p)` then `/ (1 - p)`); only the batched matrix products
+round differently (~1e-7 relative per forward), which training can amplify. On CUDA `F.dropout` is a
+fused kernel whose draws cannot be replayed, so a seed's masks come from its own CUDA generator but
+are other masks: the same distribution, not the same numbers.
+"""
+
+from __future__ import annotations
+
+import copy
+import logging
+import time
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+
+import numpy as np
+import torch
+from torch import nn
+from torch.func import functional_call, stack_module_state, vmap
+
+from palpation.graph.batch import make_batch
+from palpation.graph.clips import ClipSet
+from palpation.graph.edges import ClipTopology
+from palpation.metrics.classification import confusion
+from palpation.model.config import ModelConfig, TrainConfig
+from palpation.model.evaluate import predict
+from palpation.model.stgnn import STGNN
+from palpation.model.train import (FitResult, focal_loss, grouped_parameters, norm_stats, seed_everything,
+                                   training_batch, val_fg_iou, val_score)
+from palpation.progress import bar
+
+log = logging.getLogger(__name__)
+GRAPH_FIELDS = ("x", "edge_attr_spatial", "edge_attr_temporal", "edge_attr_global_temporal", "y")
+
+
+class GivenNoise(nn.Module):
+    """Dropout whose scaled keep-masks are handed in (one per call, in call order) instead of drawn."""
+
+    def __init__(self, p: float, feed: dict):
+        super().__init__()
+        self.p, self.feed = p, feed
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if self.feed.get("record") is not None:  # shape probe: list the masks a forward needs
+            if self.p > 0:
+                self.feed["record"].append((tuple(x.shape), self.p))
+            return x
+        if not self.training or self.p == 0:  # F.dropout draws nothing here either
+            return x
+        return x * self.feed["masks"].pop(0)
+
+
+def noisy_copy(model: STGNN, feed: dict) -> STGNN:
+    """A weightless copy of `model` (for functional_call) whose dropouts take masks from `feed`."""
+    base = copy.deepcopy(model).to("meta")
+    for name, module in list(base.named_modules()):
+        if isinstance(module, nn.Dropout):
+            parent, _, child = name.rpartition(".")
+            setattr(base.get_submodule(parent) if parent else base, child, GivenNoise(module.p, feed))
+    return base
+
+
+@dataclass
+class SeedState:
+    """What one seed owns during joint training."""
+
+    seed: int
+    rng: np.random.Generator
+    stats: object
+    gen: torch.Generator  # its dropout stream
+    best: float = -1.0
+    best_state: dict | None = None
+    best_epoch: int = -1
+    history: list = field(default_factory=list)
+    steps: list = field(default_factory=list)  # (metrics, step) to replay into its MLflow run
+    stopped: bool = False
+    batch: object = None  # its latest batch (a stopped seed keeps running on it, weight 0)
+
+
+def _graph(fields: dict, like) -> SimpleNamespace:
+    """The attributes STGNN.forward reads: per-seed tensors from `fields`, shared structure from `like`."""
+    return SimpleNamespace(**fields, edge_index=like.edge_index, num_global=like.num_global,
+                           num_global_spatial=like.num_global_spatial)
+
+
+def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology, model_cfg: ModelConfig,
+              cfg: TrainConfig, seeds: list[int], progress: bool = False) -> list[FitResult]:
+    """`train.fit` for every seed in `seeds`, trained together; one FitResult per seed, in order.
+
+    Each result's `steps` lists the (metrics, step) that `fit` would have logged while training."""
+    if len(set(seeds)) != len(seeds) or not seeds:
+        raise ValueError(f"seeds must be distinct and at least one, got {seeds}")
+    start = time.perf_counter()
+    states, models = [], []
+    for seed in seeds:  # each seed's draws in fit's order: seeding, norm clips, initial weights
+        seed_everything(seed)
+        rng = np.random.default_rng(seed)
+        stats = norm_stats(train, rest, topo, cfg, rng)
+        models.append(STGNN(topo.clip_len, model_cfg).to(cfg.device))
+        gen = torch.Generator(cfg.device)
+        if gen.device.type == "cpu":
+            gen.set_state(torch.get_rng_state())  # where fit's dropout draws start: after the init
+        else:
+            gen.manual_seed(seed)  # seed_everything seeded the CUDA generator with the seed
+        states.append(SeedState(seed, rng, stats, gen))
+    params, buffers = stack_module_state(models)
+    scratch = models[0]  # an unbatched model, loaded with one seed's weights to validate it
+    feed: dict = {"record": None, "masks": []}
+    base = noisy_copy(scratch, feed)
+
+    def forward(p, b, fields, like):
+        return functional_call(base, (p, b), (_graph(fields, like),))
+
+    def seed_loss(logits, y, alpha):
+        return focal_loss(logits, y, alpha, cfg.focal_gamma)
+
+    opt = torch.optim.Adam(grouped_parameters(params.items(), cfg.weight_decay), lr=cfg.lr)
+    sched = torch.optim.lr_scheduler.StepLR(opt, cfg.step_size, cfg.step_gamma) if cfg.schedule == "step" else None
+    alphas = torch.tensor([s.stats.alpha for s in states], dtype=torch.float32, device=cfg.device)
+    n_batches = -(-len(train) // cfg.batch_size)
+    if cfg.train_batches:
+        n_batches = min(n_batches, cfg.train_batches)
+    shapes: dict = {}
+    steps = bar(total=cfg.epochs * n_batches, desc=f"train {len(seeds)} seeds", unit="batch", enabled=progress)
+    step = 0
+    for epoch in range(cfg.epochs):
+        base.train()
+        orders = [None if s.stopped else s.rng.permutation(len(train)) for s in states]
+        losses = [[] for _ in states]
+        for b in range(n_batches):
+            for s, order in zip(states, orders):
+                if not s.stopped:
+                    idx = order[b * cfg.batch_size:(b + 1) * cfg.batch_size]
+                    m, lab = training_batch(train, idx, cfg, s.rng)
+                    s.batch = make_batch(m, lab, rest, topo, s.stats, cfg.device)
+            like = states[0].batch
+            key = (like.x.shape[0], like.edge_index.shape[1])
+            if key not in shapes:  # the dropout masks one forward of this batch size takes, in order
+                feed["record"] = []
+                base.eval()  # no running-statistics update from the probe
+                with torch.no_grad():
+                    forward({k: v[0] for k, v in params.items()}, {k: v[0] for k, v in buffers.items()},
+                            {f: getattr(like, f) for f in GRAPH_FIELDS[:-1]}, like)
+                shapes[key], feed["record"] = feed["record"], None
+                base.train()
+            if any(s.batch.x.shape[0] != key[0] for s in states):
+                raise ValueError("seeds trained together need batches of one size (same split, batch_size)")
+            feed["masks"] = [torch.stack([torch.empty(shape, device=cfg.device).bernoulli_(1 - p, generator=s.gen)
+                                          .div_(1 - p) for s in states]) for shape, p in shapes[key]]
+            fields = {f: torch.stack([getattr(s.batch, f) for s in states]) for f in GRAPH_FIELDS}
+            masks = feed["masks"]
+
+            def one(p, bu, x, ea_s, ea_t, ea_g, mask_list):
+                feed["masks"] = list(mask_list)
+                return forward(p, bu, {"x": x, "edge_attr_spatial": ea_s, "edge_attr_temporal": ea_t,
+                                       "edge_attr_global_temporal": ea_g}, like)
+
+            logits = vmap(one, randomness="error")(params, buffers, fields["x"], fields["edge_attr_spatial"],
+                                                   fields["edge_attr_temporal"],
+                                                   fields["edge_attr_global_temporal"], masks)
+            loss = vmap(seed_loss)(logits, fields["y"], alphas)
+            active = torch.tensor([0.0 if s.stopped else 1.0 for s in states], device=cfg.device)
+            opt.zero_grad()
+            (loss * active).sum().backward()  # seeds share no weights: each gets its own gradient
+            opt.step()
+            step += 1
+            for s, lst, value in zip(states, losses, loss.tolist()):
+                if not s.stopped:
+                    lst.append(value)
+                    s.steps.append(({"train/loss": value}, step))
+            if progress:
+                live = [np.mean(lst) for s, lst in zip(states, losses) if not s.stopped]
+                steps.set_postfix_str(f"epoch {epoch + 1}/{cfg.epochs} loss {np.mean(live):.5f}", refresh=False)
+            steps.update()
+        if sched:
+            sched.step()
+        for i, (s, lst) in enumerate(zip(states, losses)):
+            if not s.stopped:
+                _validate(s, i, epoch, lst, step, scratch, params, buffers, val, rest, topo, cfg)
+        if all(s.stopped for s in states):
+            break
+    steps.close()
+    seconds = time.perf_counter() - start
+    results = []
+    for s in states:
+        model = STGNN(topo.clip_len, model_cfg).to(cfg.device)
+        model.load_state_dict(s.best_state)
+        model.eval()
+        results.append(FitResult(model, s.stats, s.best_epoch, s.best, s.history, seconds, s.steps))
+    return results
+
+
+def _validate(s: SeedState, i: int, epoch: int, losses: list, step: int, scratch: STGNN, params: dict,
+              buffers: dict, val: ClipSet, rest: np.ndarray, topo: ClipTopology, cfg: TrainConfig) -> None:
+    """`fit`'s end of epoch for seed i: score val with its weights, keep the best, maybe stop early."""
+    with torch.no_grad():
+        scratch.load_state_dict({k: v[i] for k, v in {**params, **buffers}.items()})
+    probs, labels = predict(scratch, val, s.stats, rest, topo, cfg.batch_size, cfg.val_batches, cfg.device)
+    score = val_score(probs, labels, cfg)
+    c = confusion(probs, labels, cfg.threshold)
+    row = {"epoch": epoch, "train/loss": float(np.mean(losses)),
+           "val/fg_iou": val_fg_iou(probs, labels, cfg.threshold), "val/tp": c["tp"], "val/fp": c["fp"]}
+    if cfg.select_metric != "fg_iou":
+        row[f"val/{cfg.select_metric}"] = score
+    s.history.append(row)
+    s.steps.append(({k: v for k, v in row.items() if k != "epoch"}, step))
+    log.info("seed %d epoch %d: loss %.5f val %s %.4f", s.seed, epoch, row["train/loss"], cfg.select_metric, score)
+    if score > s.best:  # strict, as fit
+        s.best, s.best_epoch = score, epoch
+        s.best_state = copy.deepcopy(scratch.state_dict())
+    elif cfg.patience and epoch - s.best_epoch >= cfg.patience:
+        log.info("seed %d: early stop after epoch %d", s.seed, epoch)
+        s.stopped = True
