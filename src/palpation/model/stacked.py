@@ -8,11 +8,11 @@ initial weights (torch seeded with the seed), the dropout masks (its own generat
 order), the Adam moments (elementwise, so one Adam over stacked tensors is S Adams), early stopping
 and the best-validation checkpoint. Validation scores each seed's model unbatched with `predict`.
 
-How close to separate runs: on the CPU the draws are bit-identical (dropout masks are made as
-`F.dropout` makes them: `bernoulli_(1 - p)` then `/ (1 - p)`); only the batched matrix products
-round differently (~1e-7 relative per forward), which training can amplify. On CUDA `F.dropout` is a
-fused kernel whose draws cannot be replayed, so a seed's masks come from its own CUDA generator but
-are other masks: the same distribution, not the same numbers.
+How close to separate runs: every draw is the same. Dropout masks are drawn by `F.dropout` itself
+(on ones, so the CPU's `bernoulli_` or CUDA's fused kernel, with the same shapes in the same order)
+from the seed's own copy of the default generator's state, which is where `fit`'s dropouts draw from.
+Only the batched matrix products round differently (~1e-7 relative per forward on the CPU), which
+training can amplify; on CUDA, scatter atomics add their usual run-to-run noise.
 """
 
 from __future__ import annotations
@@ -77,7 +77,7 @@ class SeedState:
     seed: int
     rng: np.random.Generator
     stats: object
-    gen: torch.Generator  # its dropout stream
+    rng_state: torch.Tensor  # its dropout stream: the default generator's state in its own fit
     best: float = -1.0
     best_state: dict | None = None
     best_epoch: int = -1
@@ -91,6 +91,25 @@ def _graph(fields: dict, like) -> SimpleNamespace:
     """The attributes STGNN.forward reads: per-seed tensors from `fields`, shared structure from `like`."""
     return SimpleNamespace(**fields, edge_index=like.edge_index, num_global=like.num_global,
                            num_global_spatial=like.num_global_spatial)
+
+
+def _rng_state(device: str) -> torch.Tensor:
+    d = torch.device(device)
+    return torch.get_rng_state() if d.type == "cpu" else torch.cuda.get_rng_state(d)
+
+
+def _set_rng_state(state: torch.Tensor, device: str) -> None:
+    d = torch.device(device)
+    torch.set_rng_state(state) if d.type == "cpu" else torch.cuda.set_rng_state(state, d)
+
+
+def _draw_masks(s: SeedState, shapes: list, device: str) -> list[torch.Tensor]:
+    """The scaled keep-masks seed `s`'s own forward would draw: F.dropout on ones from its RNG state."""
+    _set_rng_state(s.rng_state, device)
+    masks = [torch.nn.functional.dropout(torch.ones(shape, device=device), p, training=True)
+             for shape, p in shapes]
+    s.rng_state = _rng_state(device)
+    return masks
 
 
 def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology, model_cfg: ModelConfig,
@@ -107,12 +126,8 @@ def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology
         rng = np.random.default_rng(seed)
         stats = norm_stats(train, rest, topo, cfg, rng)
         models.append(STGNN(topo.clip_len, model_cfg).to(cfg.device))
-        gen = torch.Generator(cfg.device)
-        if gen.device.type == "cpu":
-            gen.set_state(torch.get_rng_state())  # where fit's dropout draws start: after the init
-        else:
-            gen.manual_seed(seed)  # seed_everything seeded the CUDA generator with the seed
-        states.append(SeedState(seed, rng, stats, gen))
+        # where fit's dropouts start drawing: the CPU generator after the init, the seeded CUDA one
+        states.append(SeedState(seed, rng, stats, _rng_state(cfg.device)))
     params, buffers = stack_module_state(models)
     scratch = models[0]  # an unbatched model, loaded with one seed's weights to validate it
     feed: dict = {"record": None, "masks": []}
@@ -155,8 +170,8 @@ def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology
                 base.train()
             if any(s.batch.x.shape[0] != key[0] for s in states):
                 raise ValueError("seeds trained together need batches of one size (same split, batch_size)")
-            feed["masks"] = [torch.stack([torch.empty(shape, device=cfg.device).bernoulli_(1 - p, generator=s.gen)
-                                          .div_(1 - p) for s in states]) for shape, p in shapes[key]]
+            drawn = [_draw_masks(s, shapes[key], cfg.device) for s in states]
+            feed["masks"] = [torch.stack(per_call) for per_call in zip(*drawn)] if shapes[key] else []
             fields = {f: torch.stack([getattr(s.batch, f) for s in states]) for f in GRAPH_FIELDS}
             masks = feed["masks"]
 
