@@ -94,6 +94,31 @@ if TRAIN["seeds_together"]:
     ruleorder: train_seeds > train
 
 
+# Seeds together vs apart on A-to-A at the recipe's sizes (issue 17; `snakemake bench`, not part of `all`):
+# docs/results/bench_train.json is this file from the H100.
+rule bench_train:
+    input:
+        sim=TRAIN_DATA["sim"],
+        conf=conf_files("train", {"experiment": "A-to-A", "model": EXPERIMENTS["A-to-A"].model,
+                                  "recipe": TRAIN["recipe"]}),
+    output:
+        json="results/bench/train.json",
+    params:
+        py=PY,
+        device=config["device"],
+        seeds=" ".join(str(s) for s in TRAIN["seeds"]),
+        recipe=TRAIN["recipe"],
+    resources:
+        gpu=GPU,
+    log:
+        "results/logs/bench/train.log",
+    conda:
+        CONDA_ENV
+    shell:
+        "{params.py} palpation.model.benchmark --device {params.device} --sim {input.sim} --seeds {params.seeds}"
+        " --out {output.json} --override recipe={params.recipe} > {log} 2>&1"
+
+
 rule train_report:
     input:
         metrics=sweep_runs("metrics.json"),
