@@ -11,7 +11,7 @@ from palpation.graph.sources import load_dataset
 from palpation.graph.synthetic import write_meat
 from palpation.model import ModelConfig, TrainConfig
 from palpation.model.evaluate import predict
-from palpation.model.stacked import GivenNoise, fit_seeds
+from palpation.model.stacked import GivenNoise, fit_seeds, predict_seeds
 from palpation.model.train import fit
 
 COMPACT = ModelConfig("compact", 56, 64, 32)
@@ -61,5 +61,9 @@ def test_together_equals_apart_up_to_batched_rounding(meat):
         pt = predict(t.model, sets["val"], t.stats, rest, topo, 2)[0]
         assert np.abs(pa - pt).max() < 1e-5
         assert len(t.steps) == 2 * len(t.history)  # per-batch losses + one row per epoch
-    assert not np.allclose(predict(together[0].model, sets["val"], together[0].stats, rest, topo, 2)[0],
-                           predict(together[1].model, sets["val"], together[1].stats, rest, topo, 2)[0])
+    alone = [predict(t.model, sets["val"], t.stats, rest, topo, 3) for t in together]
+    assert not np.allclose(alone[0][0], alone[1][0])
+    # scoring all seeds in one vmapped forward per batch: each seed's own scores, labels in clip order
+    at_once = predict_seeds([t.model for t in together], [t.stats for t in together], sets["val"], rest, topo, 3)
+    for (pa, la), (pt, lt) in zip(alone, at_once):
+        assert np.array_equal(la, lt) and np.abs(pa - pt).max() < 1e-6

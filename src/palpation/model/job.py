@@ -31,7 +31,7 @@ from palpation.model.checkpoint import checkpoint_bytes, save_checkpoint
 from palpation.model.config import ModelConfig, TrainConfig
 from palpation.model.evaluate import predict
 from palpation.model.stgnn import count_parameters
-from palpation.model.stacked import fit_seeds
+from palpation.model.stacked import fit_seeds, predict_seeds
 from palpation.model.train import FitResult, fit
 
 log = logging.getLogger(__name__)
@@ -103,8 +103,9 @@ def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: 
     """`run_job` for seeds of one configuration (jobs differing only in seed) trained together
     (palpation.model.stacked); one MLflow run and one output folder per seed, as separate jobs.
 
-    metrics.json gains `trained_together` (the seeds and the joint wall seconds); its `train_seconds`
-    is the joint time's share per seed."""
+    The test set is scored by all seeds at once (`predict_seeds`). metrics.json gains `trained_together`
+    (the seeds and the joint training wall seconds); `train_seconds` and `test_seconds` are each seed's
+    share of the joint times."""
     first = jobs[0]
     if any(replace(j, seed=first.seed) != first for j in jobs):
         raise ValueError("jobs trained together must differ only in their seed "
@@ -113,6 +114,10 @@ def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: 
     d = load_job_data(first)
     results = fit_seeds(d.train, d.val, d.rest, d.topo, first.model, first.train, seeds, progress=progress)
     joint = results[0].train_seconds
+    t0 = time.perf_counter()  # the test set scored by all seeds at once; each seed's share of the time
+    scored = predict_seeds([r.model for r in results], [r.stats for r in results], d.test, d.rest, d.topo,
+                           first.train.batch_size, first.train.device, progress)
+    test_share = (time.perf_counter() - t0) / len(jobs)
     out = []
     for i, (job, result, out_dir) in enumerate(zip(jobs, results, out_dirs)):
         result.train_seconds = joint / len(jobs)
@@ -124,19 +129,23 @@ def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: 
             if track:
                 tracking.log_metric_history(result.steps)
             together = {"seeds": seeds, "train_seconds": joint}
-            out.append(finish_job(job, result, d, out_dir, track, progress, {"trained_together": together}))
+            out.append(finish_job(job, result, d, out_dir, track, progress, {"trained_together": together},
+                                  (*scored[i], test_share)))
     return out
 
 
 def finish_job(job: TrainJob, result: FitResult, d: JobData, out_dir: str | Path, track: bool,
-               progress: bool = False, extra: dict | None = None) -> dict:
-    """Score the test set with a fitted model, write the outputs, log them to the active run."""
+               progress: bool = False, extra: dict | None = None, scored: tuple | None = None) -> dict:
+    """Score the test set with a fitted model (unless `scored`: its probs, labels and seconds), write the
+    outputs, log them to the active run."""
     out_dir = Path(out_dir)
     rest, topo, val, test = d.rest, d.topo, d.val, d.test
-    t0 = time.perf_counter()
-    probs, labels = predict(result.model, test, result.stats, rest, topo, job.train.batch_size,
-                            device=job.train.device, progress=progress)
-    test_seconds = time.perf_counter() - t0
+    if scored is None:
+        t0 = time.perf_counter()
+        probs, labels = predict(result.model, test, result.stats, rest, topo, job.train.batch_size,
+                                device=job.train.device, progress=progress)
+        scored = (probs, labels, time.perf_counter() - t0)
+    probs, labels, test_seconds = scored
     calibration = {}
     if job.train.calibration != "none":  # fitted on the training domain's val split, never on test
         val_probs, val_labels = predict(result.model, val, result.stats, rest, topo, job.train.batch_size,

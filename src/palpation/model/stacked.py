@@ -20,7 +20,9 @@ from __future__ import annotations
 import copy
 import logging
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from functools import partial
 from types import SimpleNamespace
 
 import numpy as np
@@ -31,9 +33,10 @@ from torch.func import functional_call, stack_module_state, vmap
 from palpation.graph.batch import make_batch
 from palpation.graph.clips import ClipSet
 from palpation.graph.edges import ClipTopology
+from palpation.graph.features import clip_features
 from palpation.metrics.classification import confusion
 from palpation.model.config import ModelConfig, TrainConfig
-from palpation.model.evaluate import predict
+from palpation.model.evaluate import central_slice, predict
 from palpation.model.stgnn import STGNN
 from palpation.model.train import (FitResult, focal_loss, grouped_parameters, norm_stats, seed_everything,
                                    training_batch, val_fg_iou, val_score)
@@ -87,10 +90,43 @@ class SeedState:
     batch: object = None  # its latest batch (a stopped seed keeps running on it, weight 0)
 
 
-def _graph(fields: dict, like) -> SimpleNamespace:
-    """The attributes STGNN.forward reads: per-seed tensors from `fields`, shared structure from `like`."""
-    return SimpleNamespace(**fields, edge_index=like.edge_index, num_global=like.num_global,
-                           num_global_spatial=like.num_global_spatial)
+class Stack:
+    """The seeds' models stacked: one vmapped forward runs them all, each on its own batch."""
+
+    def __init__(self, models: list[STGNN]):
+        self.params, self.buffers = stack_module_state(models)
+        self.feed: dict = {"record": None, "masks": []}
+        self.base = noisy_copy(models[0], self.feed)
+        self.shapes: dict = {}  # dropout masks one forward takes, per batch size
+
+    def _one(self, p, b, x, ea_s, ea_t, ea_g, masks, like):
+        self.feed["masks"] = list(masks)
+        graph = SimpleNamespace(x=x, edge_attr_spatial=ea_s, edge_attr_temporal=ea_t, edge_attr_global_temporal=ea_g,
+                                edge_index=like.edge_index, num_global=like.num_global,
+                                num_global_spatial=like.num_global_spatial)  # the structure all seeds share
+        return functional_call(self.base, (p, b), (graph,))
+
+    def mask_shapes(self, like) -> list:
+        """(shape, p) of every dropout call of one forward on batches like `like`, in call order."""
+        key = (like.x.shape[0], like.edge_index.shape[1])
+        if key not in self.shapes:
+            self.feed["record"], training = [], self.base.training
+            self.base.eval()  # the probe must not update running statistics
+            with torch.no_grad():
+                self._one({k: v[0] for k, v in self.params.items()}, {k: v[0] for k, v in self.buffers.items()},
+                          *(getattr(like, f) for f in GRAPH_FIELDS[:-1]), [], like)
+            self.shapes[key], self.feed["record"] = self.feed["record"], None
+            self.base.train(training)
+        return self.shapes[key]
+
+    def __call__(self, batches: list, masks: list | None = None) -> torch.Tensor:
+        """Logits (S, n_marker_nodes) of seed i's model on batches[i]; `masks` per dropout call (S, ...)."""
+        like = batches[0]
+        if any(b.x.shape != like.x.shape for b in batches):
+            raise ValueError("seeds run together need batches of one size (same split and batch_size)")
+        fields = [torch.stack([getattr(b, f) for b in batches]) for f in GRAPH_FIELDS[:-1]]
+        return vmap(partial(self._one, like=like), randomness="error")(self.params, self.buffers, *fields,
+                                                                      masks or [])
 
 
 def _rng_state(device: str) -> torch.Tensor:
@@ -128,62 +164,36 @@ def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology
         models.append(STGNN(topo.clip_len, model_cfg).to(cfg.device))
         # where fit's dropouts start drawing: the CPU generator after the init, the seeded CUDA one
         states.append(SeedState(seed, rng, stats, _rng_state(cfg.device)))
-    params, buffers = stack_module_state(models)
+    stack = Stack(models)
     scratch = models[0]  # an unbatched model, loaded with one seed's weights to validate it
-    feed: dict = {"record": None, "masks": []}
-    base = noisy_copy(scratch, feed)
-
-    def forward(p, b, fields, like):
-        return functional_call(base, (p, b), (_graph(fields, like),))
 
     def seed_loss(logits, y, alpha):
         return focal_loss(logits, y, alpha, cfg.focal_gamma)
 
-    opt = torch.optim.Adam(grouped_parameters(params.items(), cfg.weight_decay), lr=cfg.lr)
+    def prepare(s: SeedState, order: np.ndarray, b: int) -> None:  # only s's own stream: threads are safe
+        if not s.stopped:
+            m, lab = training_batch(train, order[b * cfg.batch_size:(b + 1) * cfg.batch_size], cfg, s.rng)
+            s.batch = make_batch(m, lab, rest, topo, s.stats, cfg.device)
+
+    opt = torch.optim.Adam(grouped_parameters(stack.params.items(), cfg.weight_decay), lr=cfg.lr)
     sched = torch.optim.lr_scheduler.StepLR(opt, cfg.step_size, cfg.step_gamma) if cfg.schedule == "step" else None
     alphas = torch.tensor([s.stats.alpha for s in states], dtype=torch.float32, device=cfg.device)
     n_batches = -(-len(train) // cfg.batch_size)
     if cfg.train_batches:
         n_batches = min(n_batches, cfg.train_batches)
-    shapes: dict = {}
     steps = bar(total=cfg.epochs * n_batches, desc=f"train {len(seeds)} seeds", unit="batch", enabled=progress)
-    step = 0
+    step, pool = 0, ThreadPoolExecutor(len(states))  # the seeds' batches are built side by side
     for epoch in range(cfg.epochs):
-        base.train()
+        stack.base.train()
         orders = [None if s.stopped else s.rng.permutation(len(train)) for s in states]
         losses = [[] for _ in states]
         for b in range(n_batches):
-            for s, order in zip(states, orders):
-                if not s.stopped:
-                    idx = order[b * cfg.batch_size:(b + 1) * cfg.batch_size]
-                    m, lab = training_batch(train, idx, cfg, s.rng)
-                    s.batch = make_batch(m, lab, rest, topo, s.stats, cfg.device)
-            like = states[0].batch
-            key = (like.x.shape[0], like.edge_index.shape[1])
-            if key not in shapes:  # the dropout masks one forward of this batch size takes, in order
-                feed["record"] = []
-                base.eval()  # no running-statistics update from the probe
-                with torch.no_grad():
-                    forward({k: v[0] for k, v in params.items()}, {k: v[0] for k, v in buffers.items()},
-                            {f: getattr(like, f) for f in GRAPH_FIELDS[:-1]}, like)
-                shapes[key], feed["record"] = feed["record"], None
-                base.train()
-            if any(s.batch.x.shape[0] != key[0] for s in states):
-                raise ValueError("seeds trained together need batches of one size (same split, batch_size)")
-            drawn = [_draw_masks(s, shapes[key], cfg.device) for s in states]
-            feed["masks"] = [torch.stack(per_call) for per_call in zip(*drawn)] if shapes[key] else []
-            fields = {f: torch.stack([getattr(s.batch, f) for s in states]) for f in GRAPH_FIELDS}
-            masks = feed["masks"]
-
-            def one(p, bu, x, ea_s, ea_t, ea_g, mask_list):
-                feed["masks"] = list(mask_list)
-                return forward(p, bu, {"x": x, "edge_attr_spatial": ea_s, "edge_attr_temporal": ea_t,
-                                       "edge_attr_global_temporal": ea_g}, like)
-
-            logits = vmap(one, randomness="error")(params, buffers, fields["x"], fields["edge_attr_spatial"],
-                                                   fields["edge_attr_temporal"],
-                                                   fields["edge_attr_global_temporal"], masks)
-            loss = vmap(seed_loss)(logits, fields["y"], alphas)
+            list(pool.map(prepare, states, orders, [b] * len(states)))
+            batches = [s.batch for s in states]
+            shapes = stack.mask_shapes(batches[0])
+            drawn = [_draw_masks(s, shapes, cfg.device) for s in states]
+            logits = stack(batches, [torch.stack(per_call) for per_call in zip(*drawn)])
+            loss = vmap(seed_loss)(logits, torch.stack([x.y for x in batches]), alphas)
             active = torch.tensor([0.0 if s.stopped else 1.0 for s in states], device=cfg.device)
             opt.zero_grad()
             (loss * active).sum().backward()  # seeds share no weights: each gets its own gradient
@@ -201,10 +211,11 @@ def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology
             sched.step()
         for i, (s, lst) in enumerate(zip(states, losses)):
             if not s.stopped:
-                _validate(s, i, epoch, lst, step, scratch, params, buffers, val, rest, topo, cfg)
+                _validate(s, i, epoch, lst, step, scratch, stack, val, rest, topo, cfg)
         if all(s.stopped for s in states):
             break
     steps.close()
+    pool.shutdown()
     seconds = time.perf_counter() - start
     results = []
     for s in states:
@@ -215,11 +226,12 @@ def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology
     return results
 
 
-def _validate(s: SeedState, i: int, epoch: int, losses: list, step: int, scratch: STGNN, params: dict,
-              buffers: dict, val: ClipSet, rest: np.ndarray, topo: ClipTopology, cfg: TrainConfig) -> None:
-    """`fit`'s end of epoch for seed i: score val with its weights, keep the best, maybe stop early."""
+def _validate(s: SeedState, i: int, epoch: int, losses: list, step: int, scratch: STGNN, stack: Stack,
+              val: ClipSet, rest: np.ndarray, topo: ClipTopology, cfg: TrainConfig) -> None:
+    """`fit`'s end of epoch for seed i: score val with its weights (unbatched, as fit, so the checkpoint
+    choice sees the same numbers), keep the best, maybe stop early."""
     with torch.no_grad():
-        scratch.load_state_dict({k: v[i] for k, v in {**params, **buffers}.items()})
+        scratch.load_state_dict({k: v[i] for k, v in {**stack.params, **stack.buffers}.items()})
     probs, labels = predict(scratch, val, s.stats, rest, topo, cfg.batch_size, cfg.val_batches, cfg.device)
     score = val_score(probs, labels, cfg)
     c = confusion(probs, labels, cfg.threshold)
@@ -236,3 +248,25 @@ def _validate(s: SeedState, i: int, epoch: int, losses: list, step: int, scratch
     elif cfg.patience and epoch - s.best_epoch >= cfg.patience:
         log.info("seed %d: early stop after epoch %d", s.seed, epoch)
         s.stopped = True
+
+
+@torch.no_grad()
+def predict_seeds(models: list[STGNN], stats: list, clips: ClipSet, rest: np.ndarray, topo: ClipTopology,
+                  batch_size: int, device: str = "cpu", progress: bool = False) -> list[tuple[np.ndarray, np.ndarray]]:
+    """`evaluate.predict` of every seed's model on the same clips in one vmapped forward per batch; the
+    clip features are computed once, each seed normalises them with its own statistics."""
+    stack = Stack(models)
+    stack.base.eval()
+    centre = central_slice(topo.clip_len)
+    probs, labels = [], []
+    for start in bar(range(0, len(clips), batch_size), desc=f"score {len(models)} seeds", unit="batch",
+                     enabled=progress):
+        idx = np.arange(start, min(start + batch_size, len(clips)))
+        markers, lab = clips.gather(idx)
+        feats = clip_features(markers, rest, topo)
+        batches = [make_batch(markers, lab, rest, topo, st, device, features=feats) for st in stats]
+        p = torch.sigmoid(stack(batches)).view(len(models), len(idx), topo.n_markers)[:, :, centre]
+        probs.append(p.cpu().numpy().reshape(len(models), -1))
+        labels.append(lab.reshape(len(idx), -1)[:, centre].ravel())
+    labels = np.concatenate(labels).astype(np.int8)
+    return [(p, labels) for p in np.concatenate(probs, axis=1).astype(np.float32)]
