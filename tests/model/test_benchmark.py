@@ -8,10 +8,11 @@ TOY = ["model=compact", "graph.rest=ideal", "clip_len=2", "train.batch_size=8", 
        "train.train_batches=1", "train.val_batches=1"]
 
 
-def test_benchmark_record_at_toy_size(train_sets, tmp_path):
+def test_benchmark_record_at_toy_size(tmp_path):
     out = tmp_path / "bench_train.json"
-    record = main(["--device", "cpu", "--out", str(out), "--seeds", "0", "1", "--sim", train_sets["sim"],
+    record = main(["--device", "cpu", "--out", str(out), "--seeds", "0", "1", "--synthetic", "7", "--frames", "72",
                    "--keep", str(tmp_path / "runs"), "--override", *TOY])
+    assert record["job"]["data"]["sim"].startswith("synthetic: 7 slides x 72 frames")
     assert json.loads(out.read_text())["wall_s"] == record["wall_s"]
     assert record["job"]["config"] == "A-to-A" and record["seeds"] == [0, 1]
     assert record["wall_s"]["apart"] > 0 and record["wall_s"]["together"] > 0

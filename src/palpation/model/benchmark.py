@@ -10,8 +10,11 @@ difference| per seed (model.stacked says why they differ at all).
     python -m palpation.model.benchmark --device cuda:0 --out docs/results/bench_train.json
     python -m palpation.model.benchmark --device cpu --out /tmp/b.json --sim <manifest.json> \\
         --override model=compact graph.rest=ideal train.train_batches=2 train.val_batches=1   # toy size
+    python -m palpation.model.benchmark --device cuda:0 --synthetic 500 --out docs/results/bench_train.json
 Inputs: the Sim set of `--sim` (default results/sim/dataset/manifest.json and the trajectory files it
 lists) for A-to-A; other experiments also need their test set (data.silicone / data.meat overrides).
+`--synthetic N` needs none: it writes N synthetic slides of `--frames` frames (palpation.graph.synthetic;
+the paper's Sim set is 500 slides) and times on them; the times depend on the clip counts, not the values.
 """
 
 from __future__ import annotations
@@ -28,6 +31,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from palpation.graph.layout import rest_layout
+from palpation.graph.synthetic import write_sim
 from palpation.io import save_json
 from palpation.metrics.scores import load_scores
 from palpation.model.job import TrainJob, device_name, run_job, run_jobs_together
@@ -90,6 +95,8 @@ def bench(job: TrainJob, seeds: list[int], work: Path) -> dict:
         "wall_s": {"apart": sum(apart_s), "together": together_s, "speedup": sum(apart_s) / together_s},
         "train_s": {"apart": sum(a["train_seconds"] for a in apart),
                     "together": together[0]["trained_together"]["train_seconds"]},
+        "test_s": {"apart": sum(a["test_seconds"] for a in apart),
+                   "together": sum(t["test_seconds"] for t in together)},
         "max_abs_score_diff": max(r["max_abs_score_diff"] for r in per_seed),
         "per_seed": per_seed,
     }
@@ -103,17 +110,27 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     ap.add_argument("--sim", default="results/sim/dataset/manifest.json", help="the Sim set's manifest")
     ap.add_argument("--override", nargs="*", default=[], help="more train-app overrides (key=value)")
+    ap.add_argument("--synthetic", type=int, metavar="N", help="time on N synthetic slides instead of --sim")
+    ap.add_argument("--frames", type=int, default=398, help="frames per synthetic slide")
     ap.add_argument("--keep", help="keep both sides' outputs in this folder (default: a temporary one)")
     args = ap.parse_args(argv)
     if args.device.startswith("cuda") and not torch.cuda.is_available():
         raise SystemExit(f"benchmark: error: --device {args.device} but torch sees no CUDA device; use --device cpu")
-    if not Path(args.sim).exists():
+    if args.synthetic is None and not Path(args.sim).exists():
         raise SystemExit(f"benchmark: error: Sim manifest {args.sim} not found; run `snakemake "
-                         f"{args.sim}` (rule simulate_dataset) or pass --sim")
+                         f"{args.sim}` (rule simulate_dataset), pass --sim, or time on --synthetic 500")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
     job = compose_job(args.experiment, args.device, args.sim, args.override)
     with tempfile.TemporaryDirectory() as tmp:
+        if args.synthetic:
+            t0 = time.perf_counter()
+            sim = write_sim(Path(tmp) / "sim", rest_layout(job.rest), args.synthetic, args.frames)
+            job = replace(job, data={**job.data, "sim": str(sim)})
+            log.info("wrote %d synthetic slides in %.1f s", args.synthetic, time.perf_counter() - t0)
         record = bench(job, args.seeds, Path(args.keep or tmp))
+    if args.synthetic:
+        record["job"]["data"]["sim"] = (f"synthetic: {args.synthetic} slides x {args.frames} frames "
+                                        "(palpation.graph.synthetic)")
     record["command"] = " ".join(["python -m palpation.model.benchmark", *(argv or sys.argv[1:])])
     save_json(args.out, record)
     log.info("%s: apart %.1f s, together %.1f s (x%.2f), max |score diff| %.2e", args.out,
