@@ -89,6 +89,13 @@ def test_seeds_together_write_one_folder_and_one_mlflow_run_per_seed(train_sets,
         assert "test/ap" in r.data.metrics and "val/fg_iou" in r.data.metrics
 
 
+
+@pytest.mark.parametrize("seeds", ["[]", "[1,1]"])
+def test_seeds_together_refuse_an_empty_or_repeated_list(seeds, tmp_path):
+    cfg = compose_train(["experiment=C-to-B", f"seeds={seeds}", "tracking=false"])
+    with pytest.raises(ValueError, match=r"list distinct seeds, at least one \(or seeds=null"):
+        run(cfg, tmp_path)
+
 def test_multirun_seeds_and_clip_lens(train_sets, tmp_path):
     paths = [f"data.{k}={v}" for k, v in train_sets.items()]
     cmd = [sys.executable, "-m", "palpation.apps.train", "--multirun", "experiment=C-to-B", "seed=0,1",

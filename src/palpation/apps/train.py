@@ -55,6 +55,8 @@ def run(cfg: DictConfig, out_dir: str | Path | None = None) -> dict | list[dict]
     tags = {**_overrides(), "recipe": str(cfg.recipe.name)}  # MLflow tags only; outputs do not carry them
     if cfg.seeds is not None:
         seeds = [int(s) for s in cfg.seeds]
+        if not seeds or len(set(seeds)) != len(seeds):
+            raise ValueError(f"seeds={seeds}: list distinct seeds, at least one (or seeds=null to train `seed` alone)")
         jobs = [replace(job, seed=s) for s in seeds]
         return run_jobs_together(jobs, [Path(out_dir) / f"seed{s}" for s in seeds],
                                  params=[{**params, "seed": s} for s in seeds], track=bool(cfg.tracking),
