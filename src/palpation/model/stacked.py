@@ -87,7 +87,7 @@ class SeedState:
     history: list = field(default_factory=list)
     steps: list = field(default_factory=list)  # (metrics, step) to replay into its MLflow run
     stopped: bool = False
-    batch: object = None  # its latest batch (a stopped seed keeps running on it, weight 0)
+    batch: object = None  # its latest batch
 
 
 class Stack:
@@ -189,7 +189,8 @@ def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology
         losses = [[] for _ in states]
         for b in range(n_batches):
             list(pool.map(prepare, states, orders, [b] * len(states)))
-            batches = [s.batch for s in states]
+            idle = next(s.batch for s in states if not s.stopped)
+            batches = [idle if s.stopped else s.batch for s in states]  # a stopped seed idles, weight 0
             shapes = stack.mask_shapes(batches[0])
             drawn = [_draw_masks(s, shapes, cfg.device) for s in states]
             logits = stack(batches, [torch.stack(per_call) for per_call in zip(*drawn)])
