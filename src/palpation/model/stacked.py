@@ -6,7 +6,7 @@ of S processes taking turns. Everything that makes a seed a seed stays its own, 
 `train.fit` draws it: normalisation clips, epoch orders and augmentation (its numpy stream), the
 initial weights (torch seeded with the seed), the dropout masks (its own generator, in the forward's
 order), the Adam moments (elementwise, so one Adam over stacked tensors is S Adams), early stopping
-and the best-validation checkpoint. Validation scores each seed's model unbatched with `predict`.
+and the best-validation checkpoint. Validation and test scoring run the stack too (`score_stack`).
 
 How close to separate runs: every draw is the same. Dropout masks are drawn by `F.dropout` itself
 (on ones, so the CPU's `bernoulli_` or CUDA's fused kernel, with the same shapes in the same order)
@@ -36,7 +36,7 @@ from palpation.graph.edges import ClipTopology
 from palpation.graph.features import clip_features
 from palpation.metrics.classification import confusion
 from palpation.model.config import ModelConfig, TrainConfig
-from palpation.model.evaluate import central_slice, predict
+from palpation.model.evaluate import central_slice
 from palpation.model.stgnn import STGNN
 from palpation.model.train import (FitResult, focal_loss, grouped_parameters, norm_stats, seed_everything,
                                    training_batch, val_fg_iou, val_score)
@@ -165,7 +165,6 @@ def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology
         # where fit's dropouts start drawing: the CPU generator after the init, the seeded CUDA one
         states.append(SeedState(seed, rng, stats, _rng_state(cfg.device)))
     stack = Stack(models)
-    scratch = models[0]  # an unbatched model, loaded with one seed's weights to validate it
 
     def seed_loss(logits, y, alpha):
         return focal_loss(logits, y, alpha, cfg.focal_gamma)
@@ -210,9 +209,12 @@ def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology
             steps.update()
         if sched:
             sched.step()
+        scored = score_stack(stack, [s.stats for s in states], val, rest, topo, cfg.batch_size, cfg.val_batches,
+                             cfg.device)
+        stack.base.train()
         for i, (s, lst) in enumerate(zip(states, losses)):
             if not s.stopped:
-                _validate(s, i, epoch, lst, step, scratch, stack, val, rest, topo, cfg)
+                _validate(s, i, epoch, lst, step, stack, *scored[i], cfg)
         if all(s.stopped for s in states):
             break
     steps.close()
@@ -227,13 +229,9 @@ def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology
     return results
 
 
-def _validate(s: SeedState, i: int, epoch: int, losses: list, step: int, scratch: STGNN, stack: Stack,
-              val: ClipSet, rest: np.ndarray, topo: ClipTopology, cfg: TrainConfig) -> None:
-    """`fit`'s end of epoch for seed i: score val with its weights (unbatched, as fit, so the checkpoint
-    choice sees the same numbers), keep the best, maybe stop early."""
-    with torch.no_grad():
-        scratch.load_state_dict({k: v[i] for k, v in {**stack.params, **stack.buffers}.items()})
-    probs, labels = predict(scratch, val, s.stats, rest, topo, cfg.batch_size, cfg.val_batches, cfg.device)
+def _validate(s: SeedState, i: int, epoch: int, losses: list, step: int, stack: Stack, probs: np.ndarray,
+              labels: np.ndarray, cfg: TrainConfig) -> None:
+    """`fit`'s end of epoch for seed i from its val scores: keep the best weights, maybe stop early."""
     score = val_score(probs, labels, cfg)
     c = confusion(probs, labels, cfg.threshold)
     row = {"epoch": epoch, "train/loss": float(np.mean(losses)),
@@ -245,29 +243,36 @@ def _validate(s: SeedState, i: int, epoch: int, losses: list, step: int, scratch
     log.info("seed %d epoch %d: loss %.5f val %s %.4f", s.seed, epoch, row["train/loss"], cfg.select_metric, score)
     if score > s.best:  # strict, as fit
         s.best, s.best_epoch = score, epoch
-        s.best_state = copy.deepcopy(scratch.state_dict())
+        s.best_state = {k: v[i].detach().clone() for k, v in {**stack.params, **stack.buffers}.items()}
     elif cfg.patience and epoch - s.best_epoch >= cfg.patience:
         log.info("seed %d: early stop after epoch %d", s.seed, epoch)
         s.stopped = True
 
 
-@torch.no_grad()
 def predict_seeds(models: list[STGNN], stats: list, clips: ClipSet, rest: np.ndarray, topo: ClipTopology,
                   batch_size: int, device: str = "cpu", progress: bool = False) -> list[tuple[np.ndarray, np.ndarray]]:
-    """`evaluate.predict` of every seed's model on the same clips in one vmapped forward per batch; the
-    clip features are computed once, each seed normalises them with its own statistics."""
-    stack = Stack(models)
+    """`evaluate.predict` of every seed's model on the same clips, all seeds in one vmapped forward per
+    batch; per seed (probs, labels)."""
+    return score_stack(Stack(models), stats, clips, rest, topo, batch_size, None, device, progress)
+
+
+@torch.no_grad()
+def score_stack(stack: Stack, stats: list, clips: ClipSet, rest: np.ndarray, topo: ClipTopology, batch_size: int,
+                max_batches: int | None = None, device: str = "cpu",
+                progress: bool = False) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Central-frame scores of the stacked models (eval mode) as `predict` gives them one model at a time;
+    the clip features are computed once, each seed normalises them with its own statistics."""
     stack.base.eval()
     centre = central_slice(topo.clip_len)
+    n = len(clips) if max_batches is None else min(len(clips), max_batches * batch_size)
     probs, labels = [], []
-    for start in bar(range(0, len(clips), batch_size), desc=f"score {len(models)} seeds", unit="batch",
-                     enabled=progress):
-        idx = np.arange(start, min(start + batch_size, len(clips)))
+    for start in bar(range(0, n, batch_size), desc=f"score {len(stats)} seeds", unit="batch", enabled=progress):
+        idx = np.arange(start, min(start + batch_size, n))
         markers, lab = clips.gather(idx)
         feats = clip_features(markers, rest, topo)
         batches = [make_batch(markers, lab, rest, topo, st, device, features=feats) for st in stats]
-        p = torch.sigmoid(stack(batches)).view(len(models), len(idx), topo.n_markers)[:, :, centre]
-        probs.append(p.cpu().numpy().reshape(len(models), -1))
+        p = torch.sigmoid(stack(batches)).view(len(stats), len(idx), topo.n_markers)[:, :, centre]
+        probs.append(p.cpu().numpy().reshape(len(stats), -1))
         labels.append(lab.reshape(len(idx), -1)[:, centre].ravel())
     labels = np.concatenate(labels).astype(np.int8)
     return [(p, labels) for p in np.concatenate(probs, axis=1).astype(np.float32)]
