@@ -4,7 +4,7 @@ The seeds' models are stacked (`torch.func.stack_module_state`) and every traini
 vmapped `functional_call` over the stack, so a GPU runs S small models as one set of kernels instead
 of S processes taking turns. Everything that makes a seed a seed stays its own, drawn exactly as
 `train.fit` draws it: normalisation clips, epoch orders and augmentation (its numpy stream), the
-initial weights (torch seeded with the seed), the dropout masks (its own generator, in the forward's
+initial weights (torch seeded with the seed), the dropout masks (its own RNG state, in the forward's
 order), the Adam moments (elementwise, so one Adam over stacked tensors is S Adams), early stopping
 and the best-validation checkpoint. Validation and test scoring run the stack too (`score_stack`).
 
@@ -12,7 +12,9 @@ How close to separate runs: every draw is the same. Dropout masks are drawn by `
 (on ones, so the CPU's `bernoulli_` or CUDA's fused kernel, with the same shapes in the same order)
 from the seed's own copy of the default generator's state, which is where `fit`'s dropouts draw from.
 Only the batched matrix products round differently (~1e-7 relative per forward on the CPU), which
-training can amplify; on CUDA, scatter atomics add their usual run-to-run noise.
+training can amplify (tests/model/test_stacked.py: weights within ~2e-6, val scores within 1e-7 after
+three Adam steps, the same checkpoint epochs and val counts); on CUDA, scatter atomics add their usual
+run-to-run noise.
 """
 
 from __future__ import annotations
