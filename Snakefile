@@ -52,6 +52,7 @@ rule bench:
     input:
         rules.bench_twin.output,
         rules.bench_calibration.output,
+        rules.bench_train.output,
 
 
 onstart:

@@ -22,7 +22,7 @@ import subprocess
 import time
 import urllib.parse
 from pathlib import Path
-from typing import Any, Iterator, Mapping
+from typing import Any, Iterable, Iterator, Mapping
 
 from filelock import FileLock
 
@@ -226,6 +226,19 @@ def log_metrics(metrics: Mapping[str, float], step: int | None = None) -> None:
     import mlflow
 
     mlflow.log_metrics({k: float(v) for k, v in metrics.items()}, step=step)
+
+
+def log_metric_history(steps: Iterable[tuple[Mapping[str, float], int]]) -> None:
+    """Log (metrics, step) pairs recorded earlier into the active run, in batches (one call per step
+    would be one store transaction each)."""
+    import mlflow
+    from mlflow.entities import Metric
+
+    now = int(time.time() * 1000)
+    rows = [Metric(k, float(v), now, step) for metrics, step in steps for k, v in metrics.items()]
+    run_id = mlflow.active_run().info.run_id
+    for s in range(0, len(rows), 1000):  # MLflow's limit per log_batch
+        mlflow.MlflowClient().log_batch(run_id, metrics=rows[s:s + 1000])
 
 
 def log_artifact(path: str | os.PathLike, artifact_path: str | None = None) -> None:

@@ -64,6 +64,38 @@ def test_train_run_writes_outputs_and_mlflow(train_sets, tmp_path, results_tmp, 
     assert {"scores.npz", "pr.npz", "checkpoint.pt", "metrics.json"} <= arts
 
 
+def test_seeds_together_write_one_folder_and_one_mlflow_run_per_seed(train_sets, tmp_path, results_tmp,
+                                                                     monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    paths = [f"data.{k}={v}" for k, v in train_sets.items()]
+    cfg = compose_train(["experiment=A-to-B", "model=compact", "seeds=[0,1]", "clip_len=2", *TINY, *paths])
+    metrics = run(cfg, tmp_path / "run")
+    assert [m["seed"] for m in metrics] == [0, 1]
+    for m in metrics:
+        saved = json.loads((tmp_path / "run" / f"seed{m['seed']}" / "metrics.json").read_text())
+        assert saved["test"] == m["test"] and saved["trained_together"]["seeds"] == [0, 1]
+    assert metrics[0]["test"]["ap"] != metrics[1]["test"]["ap"]
+
+    import mlflow
+
+    mlflow.set_tracking_uri(f"sqlite:///{results_tmp / 'mlflow.db'}")
+    runs = mlflow.search_runs(experiment_names=["train"], output_format="list")
+    assert sorted(r.data.tags["seed"] for r in runs) == ["0", "1"]
+    for r in runs:
+        assert r.data.tags["trained_together"] == "0,1" and r.data.params["seed"] == r.data.tags["seed"]
+        losses = mlflow.MlflowClient().get_metric_history(r.info.run_id, "train/loss")
+        # each batch's loss and the epoch's mean (at its last step), as fit logs them, replayed afterwards
+        assert sorted(m.step for m in losses) == [1, 2, 2]
+        assert "test/ap" in r.data.metrics and "val/fg_iou" in r.data.metrics
+
+
+
+@pytest.mark.parametrize("seeds", ["[]", "[1,1]"])
+def test_seeds_together_refuse_an_empty_or_repeated_list(seeds, tmp_path):
+    cfg = compose_train(["experiment=C-to-B", f"seeds={seeds}", "tracking=false"])
+    with pytest.raises(ValueError, match=r"list distinct seeds, at least one \(or seeds=null"):
+        run(cfg, tmp_path)
+
 def test_multirun_seeds_and_clip_lens(train_sets, tmp_path):
     paths = [f"data.{k}={v}" for k, v in train_sets.items()]
     cmd = [sys.executable, "-m", "palpation.apps.train", "--multirun", "experiment=C-to-B", "seed=0,1",

@@ -51,6 +51,74 @@ rule train:
         " device={params.device} {params.overrides} {params.hydra} > {log} 2>&1"
 
 
+# train.seeds_together (the paper profile): all seeds of a sweep configuration in one process, the seeds'
+# models stacked on the GPU (palpation.model.stacked, issue 17); each seed keeps its own draws, early
+# stopping, outputs and MLflow run. Clip lengths other than train.clip_len (the Table 3 ablation) still
+# train one seed per job through rule train.
+if TRAIN["seeds_together"]:
+
+    rule train_seeds:
+        input:
+            unpack(train_inputs),
+        output:
+            metrics=expand(f"{TRAIN_RUN}/metrics.json", seed=TRAIN["seeds"], allow_missing=True),
+            scores=expand(f"{TRAIN_RUN}/scores.npz", seed=TRAIN["seeds"], allow_missing=True),
+            pr=expand(f"{TRAIN_RUN}/pr.npz", seed=TRAIN["seeds"], allow_missing=True),
+            checkpoint=expand(f"{TRAIN_RUN}/checkpoint.pt", seed=TRAIN["seeds"], allow_missing=True),
+        log:
+            "results/logs/train/{exp}_L{clip_len}_seeds.log",
+        wildcard_constraints:
+            exp="|".join(TRAIN["experiments"]),
+            clip_len=str(TRAIN["clip_len"]),
+        params:
+            rule="train_seeds",
+            py=PY,
+            overrides=train_overrides,
+            seeds=yaml_list(TRAIN["seeds"]),
+            # the app writes seed s to <run dir>/seed<s>/, so the run dir is the L<clip_len> folder
+            hydra=lambda wildcards, output: (f"hydra.run.dir={Path(output.metrics[0]).parents[1]}"
+                                             " hydra.output_subdir=.hydra/seeds"),
+            profile=PROFILE,
+            device=config["device"],
+        threads: TRAIN.get("threads", 1)
+        resources:
+            gpu=GPU,
+        conda:
+            CONDA_ENV
+        shell:
+            ("OMP_NUM_THREADS={threads} " if "threads" in TRAIN else "")
+            + "PALPATION_PROFILE={params.profile} SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.train"
+            " experiment={wildcards.exp} 'seeds={params.seeds}' clip_len={wildcards.clip_len}"
+            " device={params.device} {params.overrides} {params.hydra} > {log} 2>&1"
+
+    ruleorder: train_seeds > train
+
+
+# Seeds together vs apart on A-to-A at the recipe's sizes (issue 17; `snakemake bench`, not part of `all`):
+# docs/results/bench_train.json is this file from the H100.
+rule bench_train:
+    input:
+        sim=TRAIN_DATA["sim"],
+        conf=conf_files("train", {"experiment": "A-to-A", "model": EXPERIMENTS["A-to-A"].model,
+                                  "recipe": TRAIN["recipe"]}),
+    output:
+        json="results/bench/train.json",
+    params:
+        py=PY,
+        device=config["device"],
+        seeds=" ".join(str(s) for s in TRAIN["seeds"]),
+        recipe=TRAIN["recipe"],
+    resources:
+        gpu=GPU,
+    log:
+        "results/logs/bench/train.log",
+    conda:
+        CONDA_ENV
+    shell:
+        "{params.py} palpation.model.benchmark --device {params.device} --sim {input.sim} --seeds {params.seeds}"
+        " --out {output.json} --override recipe={params.recipe} > {log} 2>&1"
+
+
 rule train_report:
     input:
         metrics=sweep_runs("metrics.json"),

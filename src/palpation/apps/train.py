@@ -2,12 +2,15 @@
 
     python -m palpation.apps.train experiment=A-to-B seed=0
     python -m palpation.apps.train --multirun experiment=A-to-B seed=0,1,2,3,4
-Outputs land in Hydra's run dir (metrics.json, scores.npz, pr.npz, checkpoint.pt) and in MLflow.
+    python -m palpation.apps.train experiment=A-to-B 'seeds=[0,1,2,3,4]' device=cuda   # one process
+Outputs land in Hydra's run dir (metrics.json, scores.npz, pr.npz, checkpoint.pt) and in MLflow; with
+`seeds`, seed s writes them to <run dir>/seed<s>/ (one MLflow run per seed all the same).
 """
 
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 from pathlib import Path
 
 import hydra
@@ -16,7 +19,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from palpation.config_check import app_main
 from palpation.model.config import ModelConfig, TrainConfig
-from palpation.model.job import TrainJob, run_job
+from palpation.model.job import TrainJob, run_job, run_jobs_together
 
 log = logging.getLogger(__name__)
 RECIPE_KEYS = ("lr", "weight_decay", "focal_gamma", "norm_stats", "norm_clips", "rotation", "schedule",
@@ -41,8 +44,8 @@ def _overrides() -> dict:
         return {}
 
 
-def run(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
-    """The job body; `out_dir` defaults to Hydra's output dir."""
+def run(cfg: DictConfig, out_dir: str | Path | None = None) -> dict | list[dict]:
+    """The job body; `out_dir` defaults to Hydra's output dir. With `seeds`, one metrics dict per seed."""
     if out_dir is None:
         out_dir = HydraConfig.get().runtime.output_dir
     job = job_from_config(cfg)
@@ -50,6 +53,14 @@ def run(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
     params.pop("hydra", None)
     params["recipe"].pop("sizes", None)  # the chosen sizes are in train.*
     tags = {**_overrides(), "recipe": str(cfg.recipe.name)}  # MLflow tags only; outputs do not carry them
+    if cfg.seeds is not None:
+        seeds = [int(s) for s in cfg.seeds]
+        if not seeds or len(set(seeds)) != len(seeds):
+            raise ValueError(f"seeds={seeds}: list distinct seeds, at least one (or seeds=null to train `seed` alone)")
+        jobs = [replace(job, seed=s) for s in seeds]
+        return run_jobs_together(jobs, [Path(out_dir) / f"seed{s}" for s in seeds],
+                                 params=[{**params, "seed": s} for s in seeds], track=bool(cfg.tracking),
+                                 tags=tags, progress=bool(cfg.progress))
     return run_job(job, out_dir, params=params, track=bool(cfg.tracking), tags=tags,
                    progress=bool(cfg.progress))
 
@@ -58,6 +69,8 @@ def run(cfg: DictConfig, out_dir: str | Path | None = None) -> dict:
 @app_main("train")
 def main(cfg: DictConfig) -> float:
     metrics = run(cfg)
+    if isinstance(metrics, list):  # seeds trained together: their mean
+        return sum(m["test"]["ap"] for m in metrics) / len(metrics)
     return metrics["test"]["ap"]  # for sweepers that optimise
 
 

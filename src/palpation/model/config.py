@@ -9,7 +9,7 @@ composes it. Values live in the YAML files (MISSING here); the schema only gives
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, Optional
+from typing import Dict, List, Optional
 
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
@@ -138,6 +138,7 @@ class GraphSchema:
 class TrainAppConfig:
     config_name: str = MISSING
     seed: int = MISSING
+    seeds: Optional[List[int]] = MISSING  # null: train `seed` alone
     clip_len: int = MISSING
     device: str = MISSING
     train_on: str = MISSING

@@ -11,7 +11,7 @@ import logging
 import platform
 import time
 from contextlib import nullcontext
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +31,8 @@ from palpation.model.checkpoint import checkpoint_bytes, save_checkpoint
 from palpation.model.config import ModelConfig, TrainConfig
 from palpation.model.evaluate import predict
 from palpation.model.stgnn import count_parameters
-from palpation.model.train import fit
+from palpation.model.stacked import fit_seeds, predict_seeds
+from palpation.model.train import FitResult, fit
 
 log = logging.getLogger(__name__)
 OUTPUTS = ("metrics.json", "scores.npz", "pr.npz", "checkpoint.pt")
@@ -56,66 +57,132 @@ def device_name(device: str) -> str:
     return f"cpu ({platform.processor() or platform.machine()}, {torch.get_num_threads()} threads)"
 
 
-def run_job(job: TrainJob, out_dir: str | Path, params: dict | None = None, track: bool = True,
-            tags: dict | None = None, progress: bool = False) -> dict:
-    """Train, score and write outputs; returns the metrics dict also saved as metrics.json.
+@dataclass
+class JobData:
+    """The clip sets and graph structure of a job; seeds of one configuration share them."""
 
-    `progress`: tqdm bars over the training batches and the test scoring."""
-    out_dir = Path(out_dir)
+    rest: np.ndarray
+    topo: object
+    train: ClipSet
+    val: ClipSet
+    test: ClipSet
+
+
+def load_job_data(job: TrainJob) -> JobData:
     rest = rest_layout(job.rest)
     topo = clip_topology(spatial_edges(rest), job.clip_len)
     train = ClipSet(load_dataset(job.train_on, job.data[job.train_on], "train"), job.clip_len, rest)
     val = ClipSet(load_dataset(job.train_on, job.data[job.train_on], "val"), job.clip_len, rest)
     test = ClipSet(load_dataset(job.test_on, job.data[job.test_on], "test"), job.clip_len, rest)
-    log.info("%s seed %d L=%d: %d train / %d val / %d test clips", job.config_name, job.seed,
-             job.clip_len, len(train), len(val), len(test))
-    run_tags = {"config": job.config_name, "seed": str(job.seed), "clip_len": str(job.clip_len),
-                "model": job.model.name, "device": job.train.device, **(tags or {})}
-    ctx = (tracking.start_run("train", params or asdict(job), f"{job.config_name}/L{job.clip_len}", run_tags,
-                              seed=job.seed) if track else nullcontext())
+    log.info("%s L=%d: %d train / %d val / %d test clips", job.config_name, job.clip_len, len(train), len(val),
+             len(test))
+    return JobData(rest, topo, train, val, test)
+
+
+def _run_tags(job: TrainJob, tags: dict | None) -> dict:
+    return {"config": job.config_name, "seed": str(job.seed), "clip_len": str(job.clip_len),
+            "model": job.model.name, "device": job.train.device, **(tags or {})}
+
+
+def run_job(job: TrainJob, out_dir: str | Path, params: dict | None = None, track: bool = True,
+            tags: dict | None = None, progress: bool = False) -> dict:
+    """Train, score and write outputs; returns the metrics dict also saved as metrics.json.
+
+    `progress`: tqdm bars over the training batches and the test scoring."""
+    d = load_job_data(job)
+    ctx = (tracking.start_run("train", params or asdict(job), f"{job.config_name}/L{job.clip_len}",
+                              _run_tags(job, tags), seed=job.seed) if track else nullcontext())
     with ctx:
-        result = fit(train, val, rest, topo, job.model, job.train, job.seed,
+        result = fit(d.train, d.val, d.rest, d.topo, job.model, job.train, job.seed,
                      tracking.log_metrics if track else None, progress=progress)
+        return finish_job(job, result, d, out_dir, track, progress)
+
+
+def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: list[dict] | None = None,
+                      track: bool = True, tags: dict | None = None, progress: bool = False) -> list[dict]:
+    """`run_job` for seeds of one configuration (jobs differing only in seed) trained together
+    (palpation.model.stacked); one MLflow run and one output folder per seed, as separate jobs.
+
+    The test set is scored by all seeds at once (`predict_seeds`). metrics.json gains `trained_together`
+    (the seeds and the joint training wall seconds); `train_seconds` and `test_seconds` are each seed's
+    share of the joint times."""
+    first = jobs[0]
+    if any(replace(j, seed=first.seed) != first for j in jobs):
+        raise ValueError("jobs trained together must differ only in their seed "
+                         f"({first.config_name}, L={first.clip_len}); train other configurations apart")
+    seeds = [j.seed for j in jobs]
+    d = load_job_data(first)
+    results = fit_seeds(d.train, d.val, d.rest, d.topo, first.model, first.train, seeds, progress=progress)
+    joint = results[0].train_seconds
+    t0 = time.perf_counter()  # the test set scored by all seeds at once; each seed's share of the time
+    scored = predict_seeds([r.model for r in results], [r.stats for r in results], d.test, d.rest, d.topo,
+                           first.train.batch_size, first.train.device, progress)
+    test_share = (time.perf_counter() - t0) / len(jobs)
+    out = []
+    for i, (job, result, out_dir) in enumerate(zip(jobs, results, out_dirs)):
+        result.train_seconds = joint / len(jobs)
+        ctx = (tracking.start_run("train", params[i] if params else asdict(job),
+                                  f"{job.config_name}/L{job.clip_len}",
+                                  {**_run_tags(job, tags), "trained_together": ",".join(map(str, seeds))},
+                                  seed=job.seed) if track else nullcontext())
+        with ctx:
+            if track:
+                tracking.log_metric_history(result.steps)
+            together = {"seeds": seeds, "train_seconds": joint}
+            out.append(finish_job(job, result, d, out_dir, track, progress, {"trained_together": together},
+                                  (*scored[i], test_share)))
+    return out
+
+
+def finish_job(job: TrainJob, result: FitResult, d: JobData, out_dir: str | Path, track: bool,
+               progress: bool = False, extra: dict | None = None, scored: tuple | None = None) -> dict:
+    """Score the test set with a fitted model (unless `scored`: its probs, labels and seconds), write the
+    outputs, log them to the active run."""
+    out_dir = Path(out_dir)
+    rest, topo, val, test = d.rest, d.topo, d.val, d.test
+    if scored is None:
         t0 = time.perf_counter()
         probs, labels = predict(result.model, test, result.stats, rest, topo, job.train.batch_size,
                                 device=job.train.device, progress=progress)
-        test_seconds = time.perf_counter() - t0
-        calibration = {}
-        if job.train.calibration != "none":  # fitted on the training domain's val split, never on test
-            val_probs, val_labels = predict(result.model, val, result.stats, rest, topo, job.train.batch_size,
-                                            job.train.val_batches, job.train.device)
-            cal = fit_calibrator(val_probs, val_labels, job.train.calibration)
-            raw = probs
-            probs = cal.apply(raw)
-            calibration = {"calibration": cal.to_dict(),
-                           "test_raw": marker_metrics(raw, labels, job.train.threshold),
-                           "ece_raw": ece(raw, labels), "pos_share_05_raw": positive_share(raw)}
-            log.info("calibration %s on %d val scores: scale %.4f shift %.4f", cal.method, cal.n_fit,
-                     cal.scale, cal.shift)
-        test_metrics = marker_metrics(probs, labels, job.train.threshold)
-        metrics = {
-            "config": job.config_name, "seed": job.seed, "clip_len": job.clip_len,
-            "model": job.model.name, "train_on": job.train_on, "test_on": job.test_on,
-            "test": test_metrics, "best_epoch": result.best_epoch,
-            "val_fg_iou": result.history[result.best_epoch]["val/fg_iou"], "history": result.history,
-            "n_clips": {"train": len(train), "val": len(val), "test": len(test)},
-            "alpha": result.stats.alpha, "n_parameters": count_parameters(result.model),
-            "checkpoint_bytes": checkpoint_bytes(result.model),
-            "train_seconds": result.train_seconds, "test_seconds": test_seconds,
-            "device": device_name(job.train.device),
-            **calibration,  # only with a calibration: the reference recipe's metrics.json is unchanged
-        }
-        save_scores(out_dir / "scores.npz", Scores(probs, labels, *test.central_frames()))
-        save_npz(out_dir / "pr.npz", **pr_curve(probs, labels))
-        save_checkpoint(out_dir / "checkpoint.pt", result.model, job.model, result.stats, rest,
-                        extra={"config": job.config_name, "seed": job.seed, "train_on": job.train_on})
-        save_json(out_dir / "metrics.json", metrics)
-        if track:
-            tracking.log_metrics({f"test/{k}": v for k, v in test_metrics.items() if np.isfinite(v)})
-            tracking.log_metrics({"val/fg_iou_best": metrics["val_fg_iou"],
-                                  "time/train_s": result.train_seconds})
-            for name in OUTPUTS:
-                tracking.log_artifact(out_dir / name)
+        scored = (probs, labels, time.perf_counter() - t0)
+    probs, labels, test_seconds = scored
+    calibration = {}
+    if job.train.calibration != "none":  # fitted on the training domain's val split, never on test
+        val_probs, val_labels = predict(result.model, val, result.stats, rest, topo, job.train.batch_size,
+                                        job.train.val_batches, job.train.device)
+        cal = fit_calibrator(val_probs, val_labels, job.train.calibration)
+        raw = probs
+        probs = cal.apply(raw)
+        calibration = {"calibration": cal.to_dict(),
+                       "test_raw": marker_metrics(raw, labels, job.train.threshold),
+                       "ece_raw": ece(raw, labels), "pos_share_05_raw": positive_share(raw)}
+        log.info("calibration %s on %d val scores: scale %.4f shift %.4f", cal.method, cal.n_fit,
+                 cal.scale, cal.shift)
+    test_metrics = marker_metrics(probs, labels, job.train.threshold)
+    metrics = {
+        "config": job.config_name, "seed": job.seed, "clip_len": job.clip_len,
+        "model": job.model.name, "train_on": job.train_on, "test_on": job.test_on,
+        "test": test_metrics, "best_epoch": result.best_epoch,
+        "val_fg_iou": result.history[result.best_epoch]["val/fg_iou"], "history": result.history,
+        "n_clips": {"train": len(d.train), "val": len(val), "test": len(test)},
+        "alpha": result.stats.alpha, "n_parameters": count_parameters(result.model),
+        "checkpoint_bytes": checkpoint_bytes(result.model),
+        "train_seconds": result.train_seconds, "test_seconds": test_seconds,
+        "device": device_name(job.train.device),
+        **calibration,  # only with a calibration: the reference recipe's metrics.json is unchanged
+        **(extra or {}),
+    }
+    save_scores(out_dir / "scores.npz", Scores(probs, labels, *test.central_frames()))
+    save_npz(out_dir / "pr.npz", **pr_curve(probs, labels))
+    save_checkpoint(out_dir / "checkpoint.pt", result.model, job.model, result.stats, rest,
+                    extra={"config": job.config_name, "seed": job.seed, "train_on": job.train_on})
+    save_json(out_dir / "metrics.json", metrics)
+    if track:
+        tracking.log_metrics({f"test/{k}": v for k, v in test_metrics.items() if np.isfinite(v)})
+        tracking.log_metrics({"val/fg_iou_best": metrics["val_fg_iou"],
+                              "time/train_s": result.train_seconds})
+        for name in OUTPUTS:
+            tracking.log_artifact(out_dir / name)
     log.info("test %s: AUROC %.4f AP %.4f FG %.4f BG %.4f", job.test_on, test_metrics["auroc"],
              test_metrics["ap"], test_metrics["fg_iou"], test_metrics["bg_iou"])
     return metrics

@@ -56,12 +56,16 @@ def focal_loss(logits: torch.Tensor, targets: torch.Tensor, alpha: float, gamma:
     return (alpha_t * (1 - p_t) ** gamma * bce).mean()
 
 
-def param_groups(model: torch.nn.Module, weight_decay: float) -> list[dict]:
+def grouped_parameters(named, weight_decay: float) -> list[dict]:
     """Weight decay on everything except parameters whose name contains 'bias' or 'bn'."""
     decay, no_decay = [], []
-    for name, p in model.named_parameters():
+    for name, p in named:
         (no_decay if ("bias" in name or "bn" in name) else decay).append(p)
     return [{"params": decay, "weight_decay": weight_decay}, {"params": no_decay, "weight_decay": 0.0}]
+
+
+def param_groups(model: torch.nn.Module, weight_decay: float) -> list[dict]:
+    return grouped_parameters(model.named_parameters(), weight_decay)
 
 
 def norm_stats(train: ClipSet, rest: np.ndarray, topo: ClipTopology, cfg: TrainConfig,
@@ -111,6 +115,7 @@ class FitResult:
     best_val_score: float  # cfg.select_metric at best_epoch (val FG IoU in the reference recipe)
     history: list = field(default_factory=list)  # per-epoch dicts
     train_seconds: float = 0.0
+    steps: list = field(default_factory=list)  # (metrics, step) to log afterwards (model.stacked); fit logs live
 
 
 def fit(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology, model_cfg: ModelConfig,

@@ -1,0 +1,280 @@
+"""Several seeds of one configuration trained together in one process (issue 17).
+
+The seeds' models are stacked (`torch.func.stack_module_state`) and every training step is one
+vmapped `functional_call` over the stack, so a GPU runs S small models as one set of kernels instead
+of S processes taking turns. Everything that makes a seed a seed stays its own, drawn exactly as
+`train.fit` draws it: normalisation clips, epoch orders and augmentation (its numpy stream), the
+initial weights (torch seeded with the seed), the dropout masks (its own RNG state, in the forward's
+order), the Adam moments (elementwise, so one Adam over stacked tensors is S Adams), early stopping
+and the best-validation checkpoint. Validation and test scoring run the stack too (`score_stack`).
+
+How close to separate runs: every draw is the same. Dropout masks are drawn by `F.dropout` itself
+(on ones, so the CPU's `bernoulli_` or CUDA's fused kernel, with the same shapes in the same order)
+from the seed's own copy of the default generator's state, which is where `fit`'s dropouts draw from.
+Only the batched matrix products round differently (~1e-7 relative per forward on the CPU), which
+training can amplify (tests/model/test_stacked.py: weights within ~2e-6, val scores within 1e-7 after
+three Adam steps, the same checkpoint epochs and val counts); on CUDA, scatter atomics add their usual
+run-to-run noise.
+"""
+
+from __future__ import annotations
+
+import copy
+import logging
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from functools import partial
+from types import SimpleNamespace
+
+import numpy as np
+import torch
+from torch import nn
+from torch.func import functional_call, stack_module_state, vmap
+
+from palpation.graph.batch import make_batch
+from palpation.graph.clips import ClipSet
+from palpation.graph.edges import ClipTopology
+from palpation.graph.features import clip_features
+from palpation.metrics.classification import confusion
+from palpation.model.config import ModelConfig, TrainConfig
+from palpation.model.evaluate import central_slice
+from palpation.model.stgnn import STGNN
+from palpation.model.train import (FitResult, focal_loss, grouped_parameters, norm_stats, seed_everything,
+                                   training_batch, val_fg_iou, val_score)
+from palpation.progress import bar
+
+log = logging.getLogger(__name__)
+GRAPH_FIELDS = ("x", "edge_attr_spatial", "edge_attr_temporal", "edge_attr_global_temporal", "y")
+
+
+class GivenNoise(nn.Module):
+    """Dropout whose scaled keep-masks are handed in (one per call, in call order) instead of drawn."""
+
+    def __init__(self, p: float, feed: dict):
+        super().__init__()
+        self.p, self.feed = p, feed
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if self.feed.get("record") is not None:  # shape probe: list the masks a forward needs
+            if self.p > 0:
+                self.feed["record"].append((tuple(x.shape), self.p))
+            return x
+        if not self.training or self.p == 0:  # F.dropout draws nothing here either
+            return x
+        return x * self.feed["masks"].pop(0)
+
+
+def noisy_copy(model: STGNN, feed: dict) -> STGNN:
+    """A weightless copy of `model` (for functional_call) whose dropouts take masks from `feed`."""
+    base = copy.deepcopy(model).to("meta")
+    for name, module in list(base.named_modules()):
+        if isinstance(module, nn.Dropout):
+            parent, _, child = name.rpartition(".")
+            setattr(base.get_submodule(parent) if parent else base, child, GivenNoise(module.p, feed))
+    return base
+
+
+@dataclass
+class SeedState:
+    """What one seed owns during joint training."""
+
+    seed: int
+    rng: np.random.Generator
+    stats: object
+    rng_state: torch.Tensor  # its dropout stream: the default generator's state in its own fit
+    best: float = -1.0
+    best_state: dict | None = None
+    best_epoch: int = -1
+    history: list = field(default_factory=list)
+    steps: list = field(default_factory=list)  # (metrics, step) to replay into its MLflow run
+    stopped: bool = False
+    batch: object = None  # its latest batch
+
+
+class Stack:
+    """The seeds' models stacked: one vmapped forward runs them all, each on its own batch."""
+
+    def __init__(self, models: list[STGNN]):
+        self.params, self.buffers = stack_module_state(models)
+        self.feed: dict = {"record": None, "masks": []}
+        self.base = noisy_copy(models[0], self.feed)
+        self.shapes: dict = {}  # dropout masks one forward takes, per batch size
+
+    def _one(self, p, b, x, ea_s, ea_t, ea_g, masks, like):
+        self.feed["masks"] = list(masks)
+        graph = SimpleNamespace(x=x, edge_attr_spatial=ea_s, edge_attr_temporal=ea_t, edge_attr_global_temporal=ea_g,
+                                edge_index=like.edge_index, num_global=like.num_global,
+                                num_global_spatial=like.num_global_spatial)  # the structure all seeds share
+        return functional_call(self.base, (p, b), (graph,))
+
+    def mask_shapes(self, like) -> list:
+        """(shape, p) of every dropout call of one forward on batches like `like`, in call order."""
+        key = (like.x.shape[0], like.edge_index.shape[1])
+        if key not in self.shapes:
+            self.feed["record"], training = [], self.base.training
+            self.base.eval()  # the probe must not update running statistics
+            with torch.no_grad():
+                self._one({k: v[0] for k, v in self.params.items()}, {k: v[0] for k, v in self.buffers.items()},
+                          *(getattr(like, f) for f in GRAPH_FIELDS[:-1]), [], like)
+            self.shapes[key], self.feed["record"] = self.feed["record"], None
+            self.base.train(training)
+        return self.shapes[key]
+
+    def __call__(self, batches: list, masks: list | None = None) -> torch.Tensor:
+        """Logits (S, n_marker_nodes) of seed i's model on batches[i]; `masks` per dropout call (S, ...)."""
+        like = batches[0]
+        if any(b.x.shape != like.x.shape for b in batches):
+            raise ValueError("seeds run together need batches of one size (same split and batch_size)")
+        fields = [torch.stack([getattr(b, f) for b in batches]) for f in GRAPH_FIELDS[:-1]]
+        return vmap(partial(self._one, like=like), randomness="error")(self.params, self.buffers, *fields,
+                                                                      masks or [])
+
+
+def _rng_state(device: str) -> torch.Tensor:
+    d = torch.device(device)
+    return torch.get_rng_state() if d.type == "cpu" else torch.cuda.get_rng_state(d)
+
+
+def _set_rng_state(state: torch.Tensor, device: str) -> None:
+    d = torch.device(device)
+    torch.set_rng_state(state) if d.type == "cpu" else torch.cuda.set_rng_state(state, d)
+
+
+def _draw_masks(s: SeedState, shapes: list, device: str) -> list[torch.Tensor]:
+    """The scaled keep-masks seed `s`'s own forward would draw: F.dropout on ones from its RNG state."""
+    _set_rng_state(s.rng_state, device)
+    masks = [torch.nn.functional.dropout(torch.ones(shape, device=device), p, training=True)
+             for shape, p in shapes]
+    s.rng_state = _rng_state(device)
+    return masks
+
+
+def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology, model_cfg: ModelConfig,
+              cfg: TrainConfig, seeds: list[int], progress: bool = False) -> list[FitResult]:
+    """`train.fit` for every seed in `seeds`, trained together; one FitResult per seed, in order.
+
+    Each result's `steps` lists the (metrics, step) that `fit` would have logged while training."""
+    if len(set(seeds)) != len(seeds) or not seeds:
+        raise ValueError(f"seeds must be distinct and at least one, got {seeds}")
+    start = time.perf_counter()
+    states, models = [], []
+    for seed in seeds:  # each seed's draws in fit's order: seeding, norm clips, initial weights
+        seed_everything(seed)
+        rng = np.random.default_rng(seed)
+        stats = norm_stats(train, rest, topo, cfg, rng)
+        models.append(STGNN(topo.clip_len, model_cfg).to(cfg.device))
+        # where fit's dropouts start drawing: the CPU generator after the init, the seeded CUDA one
+        states.append(SeedState(seed, rng, stats, _rng_state(cfg.device)))
+    stack = Stack(models)
+
+    def seed_loss(logits, y, alpha):
+        return focal_loss(logits, y, alpha, cfg.focal_gamma)
+
+    def prepare(s: SeedState, order: np.ndarray, b: int) -> None:  # only s's own stream: threads are safe
+        if not s.stopped:
+            m, lab = training_batch(train, order[b * cfg.batch_size:(b + 1) * cfg.batch_size], cfg, s.rng)
+            s.batch = make_batch(m, lab, rest, topo, s.stats, cfg.device)
+
+    opt = torch.optim.Adam(grouped_parameters(stack.params.items(), cfg.weight_decay), lr=cfg.lr)
+    sched = torch.optim.lr_scheduler.StepLR(opt, cfg.step_size, cfg.step_gamma) if cfg.schedule == "step" else None
+    alphas = torch.tensor([s.stats.alpha for s in states], dtype=torch.float32, device=cfg.device)
+    n_batches = -(-len(train) // cfg.batch_size)
+    if cfg.train_batches:
+        n_batches = min(n_batches, cfg.train_batches)
+    steps = bar(total=cfg.epochs * n_batches, desc=f"train {len(seeds)} seeds", unit="batch", enabled=progress)
+    step, pool = 0, ThreadPoolExecutor(len(states))  # the seeds' batches are built side by side
+    for epoch in range(cfg.epochs):
+        stack.base.train()
+        orders = [None if s.stopped else s.rng.permutation(len(train)) for s in states]
+        losses = [[] for _ in states]
+        for b in range(n_batches):
+            list(pool.map(prepare, states, orders, [b] * len(states)))
+            idle = next(s.batch for s in states if not s.stopped)
+            batches = [idle if s.stopped else s.batch for s in states]  # a stopped seed idles, weight 0
+            shapes = stack.mask_shapes(batches[0])
+            drawn = [_draw_masks(s, shapes, cfg.device) for s in states]
+            logits = stack(batches, [torch.stack(per_call) for per_call in zip(*drawn)])
+            loss = vmap(seed_loss)(logits, torch.stack([x.y for x in batches]), alphas)
+            active = torch.tensor([0.0 if s.stopped else 1.0 for s in states], device=cfg.device)
+            opt.zero_grad()
+            (loss * active).sum().backward()  # seeds share no weights: each gets its own gradient
+            opt.step()
+            step += 1
+            for s, lst, value in zip(states, losses, loss.tolist()):
+                if not s.stopped:
+                    lst.append(value)
+                    s.steps.append(({"train/loss": value}, step))
+            if progress:
+                live = [np.mean(lst) for s, lst in zip(states, losses) if not s.stopped]
+                steps.set_postfix_str(f"epoch {epoch + 1}/{cfg.epochs} loss {np.mean(live):.5f}", refresh=False)
+            steps.update()
+        if sched:
+            sched.step()
+        scored = score_stack(stack, [s.stats for s in states], val, rest, topo, cfg.batch_size, cfg.val_batches,
+                             cfg.device)
+        stack.base.train()
+        for i, (s, lst) in enumerate(zip(states, losses)):
+            if not s.stopped:
+                _validate(s, i, epoch, lst, step, stack, *scored[i], cfg)
+        if all(s.stopped for s in states):
+            break
+    steps.close()
+    pool.shutdown()
+    seconds = time.perf_counter() - start
+    results = []
+    for s in states:
+        model = STGNN(topo.clip_len, model_cfg).to(cfg.device)
+        model.load_state_dict(s.best_state)
+        model.eval()
+        results.append(FitResult(model, s.stats, s.best_epoch, s.best, s.history, seconds, s.steps))
+    return results
+
+
+def _validate(s: SeedState, i: int, epoch: int, losses: list, step: int, stack: Stack, probs: np.ndarray,
+              labels: np.ndarray, cfg: TrainConfig) -> None:
+    """`fit`'s end of epoch for seed i from its val scores: keep the best weights, maybe stop early."""
+    score = val_score(probs, labels, cfg)
+    c = confusion(probs, labels, cfg.threshold)
+    row = {"epoch": epoch, "train/loss": float(np.mean(losses)),
+           "val/fg_iou": val_fg_iou(probs, labels, cfg.threshold), "val/tp": c["tp"], "val/fp": c["fp"]}
+    if cfg.select_metric != "fg_iou":
+        row[f"val/{cfg.select_metric}"] = score
+    s.history.append(row)
+    s.steps.append(({k: v for k, v in row.items() if k != "epoch"}, step))
+    log.info("seed %d epoch %d: loss %.5f val %s %.4f", s.seed, epoch, row["train/loss"], cfg.select_metric, score)
+    if score > s.best:  # strict, as fit
+        s.best, s.best_epoch = score, epoch
+        s.best_state = {k: v[i].detach().clone() for k, v in {**stack.params, **stack.buffers}.items()}
+    elif cfg.patience and epoch - s.best_epoch >= cfg.patience:
+        log.info("seed %d: early stop after epoch %d", s.seed, epoch)
+        s.stopped = True
+
+
+def predict_seeds(models: list[STGNN], stats: list, clips: ClipSet, rest: np.ndarray, topo: ClipTopology,
+                  batch_size: int, device: str = "cpu", progress: bool = False) -> list[tuple[np.ndarray, np.ndarray]]:
+    """`evaluate.predict` of every seed's model on the same clips, all seeds in one vmapped forward per
+    batch; per seed (probs, labels)."""
+    return score_stack(Stack(models), stats, clips, rest, topo, batch_size, None, device, progress)
+
+
+@torch.no_grad()
+def score_stack(stack: Stack, stats: list, clips: ClipSet, rest: np.ndarray, topo: ClipTopology, batch_size: int,
+                max_batches: int | None = None, device: str = "cpu",
+                progress: bool = False) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Central-frame scores of the stacked models (eval mode) as `predict` gives them one model at a time;
+    the clip features are computed once, each seed normalises them with its own statistics."""
+    stack.base.eval()
+    centre = central_slice(topo.clip_len)
+    n = len(clips) if max_batches is None else min(len(clips), max_batches * batch_size)
+    probs, labels = [], []
+    for start in bar(range(0, n, batch_size), desc=f"score {len(stats)} seeds", unit="batch", enabled=progress):
+        idx = np.arange(start, min(start + batch_size, n))
+        markers, lab = clips.gather(idx)
+        feats = clip_features(markers, rest, topo)
+        batches = [make_batch(markers, lab, rest, topo, st, device, features=feats) for st in stats]
+        p = torch.sigmoid(stack(batches)).view(len(stats), len(idx), topo.n_markers)[:, :, centre]
+        probs.append(p.cpu().numpy().reshape(len(stats), -1))
+        labels.append(lab.reshape(len(idx), -1)[:, centre].ravel())
+    labels = np.concatenate(labels).astype(np.int8)
+    return [(p, labels) for p in np.concatenate(probs, axis=1).astype(np.float32)]
