@@ -65,6 +65,11 @@ class LoopConfig:
     min_improvement_rel: float = 0.05
     tries_per_round: int = 2  # effects tried per round, best-ranked first, until one is kept
     pair_tries: int = 2  # then effect pairs tried jointly (dependent pairs, pairs of the BIC-best subset)
+    # compensation guard (loop.refit): every round also re-fits the current parameters with no new effect (the
+    # null try, same budget, same twin batches); an effect must pass the gate against it too. Before the final
+    # check, up to final_refit_iters Gauss-Newton steps bring the final twin to its optimum (0 = off)
+    null_try: bool = True
+    final_refit_iters: int = 3
     gate_fit_rel: float = 0.3  # gate (loop.gate): a fit that falls this much is kept if the held-out does
     gate_z: float = 2.0  # not move beyond gate_z cluster standard errors either way
     # final check (loop.unexplained): detector noise assumed when the set gives none, the test's level and
@@ -109,6 +114,8 @@ class LoopConfig:
         if self.tries_per_round < 1 or self.pair_tries < 0:
             raise ValueError(f"loop.tries_per_round={self.tries_per_round}, loop.pair_tries={self.pair_tries}: "
                              "need tries_per_round >= 1 and pair_tries >= 0")
+        if self.final_refit_iters < 0:
+            raise ValueError(f"loop.final_refit_iters={self.final_refit_iters}: need >= 0 (0 = no final refit)")
         if not 0 < self.gate_fit_rel <= 1 or self.gate_z <= 0:
             raise ValueError(f"loop.gate_fit_rel={self.gate_fit_rel}, loop.gate_z={self.gate_z}: need "
                              "0 < gate_fit_rel <= 1 and gate_z > 0")

@@ -122,6 +122,15 @@ def verdict_lines(p: Problem, meta: Mapping) -> list[str]:
                  f"keeps {'+'.join(ref['best_subset']) or 'nothing'} ({ref['best_subset_share']:.0%}), on the round-0 "
                  f"twin {'+'.join(first['best_subset']) or 'nothing'} ({first['best_subset_share']:.0%})"
                  + ("." if same else ": they differ, so the round-0 stiffness absorbed part of a signature."))
+    nulled = [r for r in p.rounds if "not beyond re-fitting" in ((r.get("after") or {}).get("gate") or {}).get("why", "")]
+    if nulled:
+        L.append("* Refused because re-fitting the current parameters alone (the null try) did as well: "
+                 + ", ".join(f"{r['effect']} (round {r['round']})" for r in nulled) + ".")
+    rf = f.get("refit")
+    if rf and rf["kept"]:
+        L.append(f"* Final refit ({rf['kept']} Gauss-Newton step(s) of the fitted parameters): fitted MAE "
+                 f"{rf['before']['fit']:.2f} → {rf['after']['fit']:.2f} px, held-out {rf['before']['heldout']:.2f} → "
+                 f"{rf['after']['heldout']:.2f} px.")
     t = f.get("test")
     if t:
         head = (f"* Remaining residual: RMS {t['rms_px']:.2f} px per coordinate on the fitted states against detector "
