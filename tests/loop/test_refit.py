@@ -86,3 +86,21 @@ def test_final_refit_converges_a_nonlinear_stiffness_and_keeps_the_heldout():
     out = converge([p], simulate, refit_columns, {}, None, iters=6, z_crit=2.0)["toy"]
     assert out["before"]["fit"] > 1.0 and out["after"]["fit"] < 0.05 and out["kept"] >= 2
     assert abs(np.log(p.params["E"] / E0)) < 0.01 and out["after"]["heldout"] < out["before"]["heldout"]
+
+
+def test_parallel_proposals_give_the_serial_search(tmp_path):
+    # the Optuna proposals made in worker processes (loop.search.ask_workers) are the serial ones: each study
+    # is asked by one process at a time from its saved sampler state, whatever the scheduling
+    from palpation.loop.recalibrate import recalibrate
+
+    out = {}
+    for workers in (1, 2):
+        probs = [problem({"E": E0, "mount_tilt_x_deg": m}, start_E=E0 * 1.5, seed=i) for i, m in enumerate((0.0, 2.0))]
+        for p in probs:
+            p.name, p.key = f"toy{p.targets[0].markers[0, 0]:.3f}", f"k{len(out)}{p.targets[0].markers[0, 0]:.3f}"
+            p.searched = ["E", "mount_tilt_x_deg"]
+        s = SearchSettings(sampler="tpe", n_trials=5, n_startup=2, batch_size=2, ask_workers=workers)
+        res = recalibrate(probs, sim_of(), s, tmp_path / f"w{workers}.db", "t", "toy",
+                          {p.name: [dict(p.params)] for p in probs})
+        out[workers] = [(r["params"], r["value"], r["n_trials"]) for r in res.values()]
+    assert out[1] == out[2] and all(n == 5 for _, _, n in out[1])
