@@ -122,6 +122,12 @@ def recalibrate(problems: list, simulate: Simulate, settings: SearchSettings, db
 _POOL: dict = {}
 
 
+def _one_thread() -> None:
+    import os  # before torch is imported by the GP sampler: one thread per worker, the workers share the cores
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ[var] = "1"
+
+
 def _propose_one(db_path: str, name: str, space: list, s: SearchSettings) -> None:
     study = open_study(Path(db_path), name, make_sampler(s.sampler, s.seed, s.n_startup), "minimize")
     next_batch(study, space, s.n_trials, s.n_startup, s.batch_size)
@@ -142,7 +148,8 @@ def propose_parallel(db_path: Path, names: list[str], spaces: list, s: SearchSet
 
     key = s.ask_workers
     if key not in _POOL:  # spawn: the parent may hold a CUDA context (the twin), the workers need none
-        _POOL[key] = ProcessPoolExecutor(max_workers=key, mp_context=multiprocessing.get_context("spawn"))
+        _POOL[key] = ProcessPoolExecutor(max_workers=key, mp_context=multiprocessing.get_context("spawn"),
+                                         initializer=_one_thread)
         atexit.register(_POOL[key].shutdown)
     futures = [_POOL[key].submit(_propose_one, str(db_path), n, sp, s) for n, sp in zip(names, spaces)]
     for f in futures:
