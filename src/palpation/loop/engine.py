@@ -265,7 +265,7 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                 break
             warm, extra = {}, []
             if attempt == 0 and cfg.null_try:  # re-fit without a new effect, in the same twin batches
-                for p in trying:
+                for p in [p for p in trying if before[p.name][4]]:  # something to re-fit
                     q, starts = null_problem(p, before[p.name][4], trust_region(p, before[p.name][4],
                                              cfg.search.trust_factor, cfg.search.bounds), before[p.name][5],
                                              refits[p.name], steps, cfg.search.bounds)
