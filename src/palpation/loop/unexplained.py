@@ -178,7 +178,7 @@ def check_all(problems: list, simulate, cfg, sigmas: Mapping[str, float]) -> Non
     from palpation.loop.refit import converge
 
     evaluate([p for p in problems if p.markers is None], simulate)
-    refits = {}
+    polished = {}
     if cfg.final_refit_iters > 0:  # test what the twin cannot reach, not what the search left (loop.refit)
         for p in problems:
             p.refit = refit_dofs(p)
@@ -188,7 +188,7 @@ def check_all(problems: list, simulate, cfg, sigmas: Mapping[str, float]) -> Non
                 p.refit = refit_dofs(p)
             return signatures([replace(p, candidates=[]) for p in ps], simulate, dict(cfg.steps))[1]
 
-        refits = converge(problems, simulate, refit_columns, dict(cfg.steps), cfg.search.bounds,
+        polished = converge(problems, simulate, refit_columns, dict(cfg.steps), cfg.search.bounds,
                           cfg.final_refit_iters, cfg.gate_z)
     stale = [p for p in problems if p.last_signatures is None or p.last_signatures["params"] != p.params]
     for p in stale:
@@ -202,5 +202,5 @@ def check_all(problems: list, simulate, cfg, sigmas: Mapping[str, float]) -> Non
         s = p.last_signatures
         p.final = final_check(p, s["sigs"], s["cond"], s["refit"], s["refit_dofs"], sigmas[p.name],
                               cfg.unexplained_alpha, cfg.unexplained_ratio)
-        if p.name in refits:
-            p.final["refit"] = refits[p.name]
+        if p.name in polished:
+            p.final["refit"] = polished[p.name]
