@@ -7,7 +7,9 @@ states; name the effect the attribution ranks best; recalibrate the searched par
 effect's, warm-started at the attribution's linear estimate; keep the effect only if the held-out
 MAE falls by at least min(min_improvement_px, min_improvement_rel x MAE) (the fitted MAE where nothing
 is held out). A rejected effect restores the previous twin; the next-ranked one gets a try
-(`tries_per_round`), and a round with no kept effect ends that problem's loop.
+(`tries_per_round`), and a round with no kept effect ends that problem's loop. An effect must also pass
+the gate against the round's null try, the current parameters re-fitted with the same budget and no new
+effect (loop.refit), so it is not credited with what finishing the old fit would have bought.
 """
 
 from __future__ import annotations
@@ -258,7 +260,7 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                 p.done = True
                 p.rounds.append(_record(k, p, None, att, before[p.name], None, accepted=False))
                 log.info("loop '%s' round %d: no effect explains the residual (BIC); stop", p.name, k)
-        nulls: dict[str, tuple] = {}  # per problem: the null try's (summary, markers), or None
+        nulls: dict[str, tuple] = {}  # per problem: the null try's (summary, markers, fit), or None if it diverged
         for attempt in range(max((len(q) for q in queue.values()), default=0)):
             trying = [p for p in active if not p.done and len(queue[p.name]) > attempt]
             if not trying:
