@@ -77,7 +77,9 @@ def open_study(db_path: Path, name: str, sampler: optuna.samplers.BaseSampler,
                direction: str) -> optuna.Study:
     db_path.parent.mkdir(parents=True, exist_ok=True)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    study = optuna.create_study(storage=f"sqlite:///{db_path}", study_name=name, sampler=sampler,
+    # a generous lock timeout: the loop's parallel proposers (loop.recalibrate) write to one file at once
+    storage = optuna.storages.RDBStorage(f"sqlite:///{db_path}", engine_kwargs={"connect_args": {"timeout": 300}})
+    study = optuna.create_study(storage=storage, study_name=name, sampler=sampler,
                                 direction=direction, load_if_exists=True)
     state = study.user_attrs.get(SAMPLER_ATTR)
     if state is not None:

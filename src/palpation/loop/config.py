@@ -26,6 +26,9 @@ class SearchSettings:
     # rounds >= 1: a log-scaled parameter fitted in an earlier round is searched within this factor of its
     # value (a trust region); 0 = off. Off by default: on the photos E moves x3 once surface contact is in.
     trust_factor: float = 0.0
+    # processes that make the Optuna proposals of all problems' studies in parallel (1 = in this process).
+    # A GP proposal costs ~0.5 s of CPU: with 60 self-test problems on a GPU they, not the twin, set the pace
+    ask_workers: int = 1
 
 
 @dataclass
@@ -65,6 +68,11 @@ class LoopConfig:
     min_improvement_rel: float = 0.05
     tries_per_round: int = 2  # effects tried per round, best-ranked first, until one is kept
     pair_tries: int = 2  # then effect pairs tried jointly (dependent pairs, pairs of the BIC-best subset)
+    # compensation guard (loop.refit): every round also re-fits the current parameters with no new effect (the
+    # null try, same budget, same twin batches); an effect must pass the gate against it too. Before the final
+    # check, up to final_refit_iters Gauss-Newton steps bring the final twin to its optimum (0 = off)
+    null_try: bool = True
+    final_refit_iters: int = 3
     gate_fit_rel: float = 0.3  # gate (loop.gate): a fit that falls this much is kept if the held-out does
     gate_z: float = 2.0  # not move beyond gate_z cluster standard errors either way
     # final check (loop.unexplained): detector noise assumed when the set gives none, the test's level and
@@ -103,12 +111,15 @@ class LoopConfig:
                 raise ValueError(f"loop.search.bounds.{name}: need a known parameter and [low, high] with "
                                  f"low < high, got {pair}")
         for s in (self.search,):
-            if s.sampler not in SAMPLERS or s.n_trials < 1 or s.n_startup < 0 or s.batch_size < 1:
+            if s.sampler not in SAMPLERS or s.n_trials < 1 or s.n_startup < 0 or s.batch_size < 1 \
+                    or s.ask_workers < 1:
                 raise ValueError(f"loop.search: need sampler in {SAMPLERS}, n_trials >= 1, n_startup >= 0, "
-                                 f"batch_size >= 1, got {s}")
+                                 f"batch_size >= 1, ask_workers >= 1, got {s}")
         if self.tries_per_round < 1 or self.pair_tries < 0:
             raise ValueError(f"loop.tries_per_round={self.tries_per_round}, loop.pair_tries={self.pair_tries}: "
                              "need tries_per_round >= 1 and pair_tries >= 0")
+        if self.final_refit_iters < 0:
+            raise ValueError(f"loop.final_refit_iters={self.final_refit_iters}: need >= 0 (0 = no final refit)")
         if not 0 < self.gate_fit_rel <= 1 or self.gate_z <= 0:
             raise ValueError(f"loop.gate_fit_rel={self.gate_fit_rel}, loop.gate_z={self.gate_z}: need "
                              "0 < gate_fit_rel <= 1 and gate_z > 0")

@@ -7,7 +7,9 @@ states; name the effect the attribution ranks best; recalibrate the searched par
 effect's, warm-started at the attribution's linear estimate; keep the effect only if the held-out
 MAE falls by at least min(min_improvement_px, min_improvement_rel x MAE) (the fitted MAE where nothing
 is held out). A rejected effect restores the previous twin; the next-ranked one gets a try
-(`tries_per_round`), and a round with no kept effect ends that problem's loop.
+(`tries_per_round`), and a round with no kept effect ends that problem's loop. An effect must also pass
+the gate against the round's null try, the current parameters re-fitted with the same budget and no new
+effect (loop.refit), so it is not credited with what finishing the old fit would have bought.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from palpation.loop.effects import EFFECTS, PARAMS, Dof, bounds, clip, move
 from palpation.loop.gate import decide, heldout_z
 from palpation.loop.inputs import Target
 from palpation.loop.recalibrate import recalibrate
+from palpation.loop.refit import NULL, null_problem
 from palpation.progress import bar
 
 log = logging.getLogger(__name__)
@@ -257,11 +260,19 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                 p.done = True
                 p.rounds.append(_record(k, p, None, att, before[p.name], None, accepted=False))
                 log.info("loop '%s' round %d: no effect explains the residual (BIC); stop", p.name, k)
+        nulls: dict[str, tuple] = {}  # per problem: the null try's (summary, markers, fit), or None if it diverged
         for attempt in range(max((len(q) for q in queue.values()), default=0)):
             trying = [p for p in active if not p.done and len(queue[p.name]) > attempt]
             if not trying:
                 break
-            warm = {}
+            warm, extra = {}, []
+            if attempt == 0 and cfg.null_try:  # re-fit without a new effect, in the same twin batches
+                for p in [p for p in trying if before[p.name][4]]:  # something to re-fit
+                    q, starts = null_problem(p, before[p.name][4], trust_region(p, before[p.name][4],
+                                             cfg.search.trust_factor, cfg.search.bounds), before[p.name][5],
+                                             refits[p.name], steps, cfg.search.bounds)
+                    extra.append(q)
+                    warm[q.name] = starts
             for p in trying:
                 item, att = queue[p.name][attempt], before[p.name][3]
                 old = before[p.name][4]
@@ -270,11 +281,13 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                 estimates = linear_estimate(p, item["effects"], before[p.name][5], item["sigs"], refits[p.name],
                                             steps, cfg.search.bounds)
                 warm[p.name] = [dict(before[p.name][1]), *estimates]
-            fits = recalibrate(trying, simulate, cfg.search, db_path, f"r{k}t{attempt}", twin_key, warm,
+            fits = recalibrate([*trying, *extra], simulate, cfg.search, db_path, f"r{k}t{attempt}", twin_key, warm,
                                progress=progress)
-            for p in trying:
+            for p in [*trying, *extra]:
                 p.params.update(fits[p.name]["params"])
-            diverged = evaluate(trying, simulate, strict=False)
+            diverged = evaluate([*trying, *extra], simulate, strict=False)
+            for q in extra:  # a diverged null try leaves the previous twin as the only reference
+                nulls[q.name[:-len(NULL)]] = None if q.name in diverged else (q.summary(), q.markers, fits[q.name])
             for p in trying:
                 item, (b, b_params, b_markers, att, b_searched, _) = queue[p.name][attempt], before[p.name]
                 if p.name in diverged:  # the fit's optimum was found on the fitted states only
@@ -293,6 +306,18 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                 ok, why = decide(b, a, evidence, cfg.min_improvement_px, cfg.min_improvement_rel, cfg.gate_fit_rel,
                                  cfg.gate_z)
                 after = {**a, "fit_result": fits[p.name], "gate": {**evidence, "why": why}}
+                if nulls.get(p.name) is not None:  # and beyond what re-fitting alone reached (refit.py)
+                    n_sum, n_markers, n_fit = nulls[p.name]
+                    ev0 = heldout_z([p.targets[i].markers for i in held], [n_markers[i] for i in held],
+                                    [p.markers[i] for i in held])
+                    ok0, why0 = decide(n_sum, a, ev0, cfg.min_improvement_px, cfg.min_improvement_rel,
+                                       cfg.gate_fit_rel, cfg.gate_z)
+                    after["gate_null"] = {**ev0, "why": why0, "fit": n_sum["fit"], "heldout": n_sum["heldout"],
+                                          "params": n_fit["params"]}
+                    if ok and not ok0:
+                        why = f"{why}; but not beyond re-fitting alone (null try: {why0})"
+                    ok = ok and ok0
+                    after["gate"]["why"] = why
                 p.rounds.append(_record(k, p, item, att, before[p.name], after, ok))
                 log.info("loop '%s' round %d try %d: %s explains %.1f %% of the residual; MAE fit %.2f -> %.2f "
                          "px; %s: %s", p.name, k, attempt + 1, "+".join(item["effects"]), 100 * item["share"],

@@ -45,8 +45,9 @@ SEARCH_VERSION = 4
 
 def study_name(key: str, tag: str, space: list[ParamSpec], fixed: Mapping[str, float], s: SearchSettings,
                twin_key: str) -> str:
+    search = {k: v for k, v in s.__dict__.items() if k != "ask_workers"}  # where proposals are made: no matter
     blob = json.dumps({"version": SEARCH_VERSION, "key": key, "tag": tag, "space": [p.__dict__ for p in space],
-                       "fixed": {k: float(v) for k, v in sorted(fixed.items())}, "search": s.__dict__,
+                       "fixed": {k: float(v) for k, v in sorted(fixed.items())}, "search": search,
                        "twin": twin_key}, sort_keys=True, default=str)
     return f"loop-{tag}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
 
@@ -72,11 +73,15 @@ def recalibrate(problems: list, simulate: Simulate, settings: SearchSettings, db
             for w in (warm or {}).get(p.name, []):
                 study.enqueue_trial(clip({k: w[k] for k in p.searched}, limits), skip_if_exists=True)
         runs.append({"p": p, "space": space, "study": study, "seen": {}})
+    if settings.ask_workers > 1:  # the proposals come from worker processes (see propose_parallel)
+        logging.getLogger("palpation.calibration.search").setLevel(logging.WARNING)  # 'left running' per trial
     done0 = sum(min(completed(r["study"]), settings.n_trials) for r in runs)
     trials = bar(total=settings.n_trials * len(runs), initial=done0, desc=f"recalibrate {tag}", unit="trial",
                  enabled=progress, leave=False)
     while True:
         asks = []
+        if settings.ask_workers > 1:
+            propose_parallel(db_path, [r["study"].study_name for r in runs], [r["space"] for r in runs], settings)
         for run in runs:
             batch = next_batch(run["study"], run["space"], settings.n_trials, settings.n_startup,
                                settings.batch_size)  # a killed run's last batch comes first
@@ -112,6 +117,43 @@ def recalibrate(problems: list, simulate: Simulate, settings: SearchSettings, db
         out[run["p"].name] = {"params": dict(best.params), "value": float(best.value), "trial": best.number,
                               "study": run["study"].study_name, "n_trials": completed(run["study"])}
     return out
+
+
+_POOL: dict = {}
+
+
+def _one_thread() -> None:
+    import os  # before torch is imported by the GP sampler: one thread per worker, the workers share the cores
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ[var] = "1"
+
+
+def _propose_one(db_path: str, name: str, space: list, s: SearchSettings) -> None:
+    study = open_study(Path(db_path), name, make_sampler(s.sampler, s.seed, s.n_startup), "minimize")
+    next_batch(study, space, s.n_trials, s.n_startup, s.batch_size)
+
+
+def propose_parallel(db_path: Path, names: list[str], spaces: list, s: SearchSettings) -> None:
+    """Ask every study for its next batch in `s.ask_workers` processes (a GP proposal costs ~0.5 s of CPU
+    and 60 self-test problems ask thousands of them per round; the twin batch on a GPU takes seconds).
+
+    Each worker opens the study from the SQLite file with the sampler state the last proposal saved and
+    leaves its trials RUNNING with their parameters; the caller's next_batch then picks them up as an
+    interrupted batch (calibration.search.interrupted), the same path a resumed search takes. Every study
+    is asked by one worker at a time and told between rounds, so the proposals do not depend on the
+    scheduling: a fixed seed gives the same search as the serial path (tested)."""
+    import atexit
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    key = s.ask_workers
+    if key not in _POOL:  # spawn: the parent may hold a CUDA context (the twin), the workers need none
+        _POOL[key] = ProcessPoolExecutor(max_workers=key, mp_context=multiprocessing.get_context("spawn"),
+                                         initializer=_one_thread)
+        atexit.register(_POOL[key].shutdown)
+    futures = [_POOL[key].submit(_propose_one, str(db_path), n, sp, s) for n, sp in zip(names, spaces)]
+    for f in futures:
+        f.result()
 
 
 def best_trial(study: optuna.Study) -> optuna.trial.FrozenTrial:

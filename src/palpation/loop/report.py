@@ -122,6 +122,15 @@ def verdict_lines(p: Problem, meta: Mapping) -> list[str]:
                  f"keeps {'+'.join(ref['best_subset']) or 'nothing'} ({ref['best_subset_share']:.0%}), on the round-0 "
                  f"twin {'+'.join(first['best_subset']) or 'nothing'} ({first['best_subset_share']:.0%})"
                  + ("." if same else ": they differ, so the round-0 stiffness absorbed part of a signature."))
+    nulled = [r for r in p.rounds if "not beyond re-fitting" in ((r.get("after") or {}).get("gate") or {}).get("why", "")]
+    if nulled:
+        L.append("* Refused because re-fitting the current parameters alone (the null try) did as well: "
+                 + ", ".join(f"{r['effect']} (round {r['round']})" for r in nulled) + ".")
+    rf = f.get("refit")
+    if rf and rf["kept"]:
+        L.append(f"* Final refit ({rf['kept']} Gauss-Newton step(s) of the fitted parameters): fitted MAE "
+                 f"{rf['before']['fit']:.2f} → {rf['after']['fit']:.2f} px, held-out {rf['before']['heldout']:.2f} → "
+                 f"{rf['after']['heldout']:.2f} px.")
     t = f.get("test")
     if t:
         head = (f"* Remaining residual: RMS {t['rms_px']:.2f} px per coordinate on the fitted states against detector "
@@ -246,7 +255,9 @@ def selftest_markdown(rows: list[dict], table: Mapping[str, Mapping[str, int]], 
          f"{summ['out_of_list_runs']} (aim >= 80 %)",
          f"* in-list runs reported `unexplained`: **{summ['in_list_unexplained']}** (aim 0)",
          f"* gate over {summ['gate_tries']} tries: false accept {pct(summ['gate_false_accept'])} (an effect set not "
-         f"all injected kept), false reject {pct(summ['gate_false_reject'])} (an injected subset refused)", "",
+         f"all injected kept), false reject {pct(summ['gate_false_reject'])} (an injected subset refused); refused "
+         f"because re-fitting alone did as well (null try): {summ.get('null_refused_wrong', 0)} wrong, "
+         f"{summ.get('null_refused_right', 0)} injected", "",
          "## Confusion (rows named, columns injected; a run counts in every pair of its sets)", "",
          "| named \\ injected | " + " | ".join(cols) + " |", "|---" * (len(cols) + 1) + "|"]
     for n, counts in table.items():

@@ -184,8 +184,9 @@ def run_selftest(cfg: LoopConfig, simulate, base: Mapping[str, float], template:
                      "mae_after_px": p.summary()["all"], "excess_ratio": p.final["test"]["excess_ratio"],
                      "injected_effects": inj.effects, "unlisted": inj.unlisted, "named": added,
                      "unexplained": unexplained, "strengths": inj.strengths, "betas": inj.betas,
-                     "tries": [{"round": r["round"], "effects": r.get("effects", []), "accepted": r["accepted"]}
-                               for r in p.rounds],
+                     "tries": [{"round": r["round"], "effects": r.get("effects", []), "accepted": r["accepted"],
+                                "null_refused": "not beyond re-fitting" in ((r.get("after") or {}).get("gate") or {})
+                                .get("why", "")} for r in p.rounds],
                      "injected": {k: inj.params[k] for e in inj.effects for k in EFFECTS[e].params},
                      "recovered": {k: p.params[k] for e in inj.effects for k in EFFECTS[e].params}})
     return rows, problems, injections
@@ -224,6 +225,9 @@ def summary(rows: list[dict]) -> dict:
             "gate_false_accept": float(np.mean([t["accepted"] for t in wrong])) if wrong else nan,
             "gate_false_reject": float(np.mean([not t["accepted"] for t in right])) if right else nan,
             "gate_tries": len(tries),
+            # refused only because the null try (re-fitting without the effect) did as well (loop.refit)
+            "null_refused_wrong": int(sum(t.get("null_refused", False) for t in wrong)),
+            "null_refused_right": int(sum(t.get("null_refused", False) for t in right)),
             "mae_before_mean_px": float(np.mean([r["mae_before_px"] for r in rows])),
             "mae_after_mean_px": float(np.mean([r["mae_after_px"] for r in rows])),
             "cases": dict(Counter(r["effects_injected"] for r in rows))}
