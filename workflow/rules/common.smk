@@ -66,6 +66,7 @@ TWIN_ABL_RUN = str(run_dir(f"{TRAIN_DIR}/twin_calibrated", "{exp}", "{clip_len}"
 TWIN_ABLATION_FILES = (
     [f"{TRAIN_REPORT}/twin_ablation.csv", f"{TRAIN_REPORT}/twin_ablation.md"] if TWIN_ABL["seeds"] else []
 )
+JUDGE = config["judge"]  # issue 12, judge.smk: the downstream judge of the candidate twins (seeds [] skips it)
 MAPS_CONFIGS = config["maps"].get("configs", TRAIN["experiments"])
 # The recipe ablation (issue 15, recipe.smk): runs <RECIPE_DIR>/<recipe>/<switch_off>/<exp>/L<n>/seed<s>/
 RECIPE_ABL = TRAIN["recipe_ablation"]
