@@ -4,36 +4,10 @@
 # Candidates: calibrated (calibrate.smk), photo_loop (loop.smk), slide_loop_odd / slide_loop_even (the
 # slide loop's fold twins, slides.smk). Reuses the Sim sets and runs that exist: photo_loop = the main
 # sweep (results/train), calibrated = the twin ablation's runs (results/train/twin_calibrated).
-# Needs common.smk (JUDGE, PY, TWIN_ARGS, fit_overrides, hydra_dir, run_dir) and the rule files above.
+# Needs common.smk (JUDGE*, judge_* helpers, PY, TWIN_ARGS, fit_overrides, hydra_dir) and the rule files above.
 # Opt-in: judge.seeds [] (quick) leaves it out of `all`; the paper and tiny profiles turn it on.
 
-JUDGE_DIR = "results/judge"
-JUDGE_FOLDS = ["odd", "even"]
-JUDGE_TWINS = ["calibrated", "photo_loop"] + [f"slide_loop_{f}" for f in JUDGE_FOLDS]
-JUDGE_RUN = str(run_dir(f"{JUDGE_DIR}/train/{{twin}}", "{exp}", "{clip_len}", "{seed}"))
-JUDGE_EXPERIMENTS = ["A-to-B", "A-to-C"]  # Sim -> Silicone (cross-fitted), Sim -> Meat
 JUDGE_CONF = conf_files("twin_judge", {"twin/mesh": config["twin_resolution"]})
-JUDGE_FILES = (
-    [f"{JUDGE_DIR}/{n}" for n in ("twin_selection.csv", "twin_selection.md", "slide_motion.png", "slide_motion.pdf")]
-    if JUDGE["seeds"] else []
-)
-
-
-def judge_fit(twin):
-    if twin == "calibrated":
-        return rules.calibrate.output.fit
-    if twin == "photo_loop":
-        return rules.loop.output.fit
-    return f"{JUDGE_DIR}/twins/{twin}/twin_fit/fitted.yaml"
-
-
-def judge_runs_root(twin):
-    return {"calibrated": f"{TRAIN_DIR}/twin_calibrated", "photo_loop": TRAIN_DIR}.get(twin, f"{JUDGE_DIR}/train/{twin}")
-
-
-def judge_scores():
-    return [str(run_dir(judge_runs_root(t), e, TRAIN["clip_len"], s) / "scores.npz")
-            for t in JUDGE_TWINS for e in JUDGE_EXPERIMENTS for s in JUDGE["seeds"]]
 
 
 rule judge_fold_twin:
@@ -103,10 +77,6 @@ use rule simulate_dataset as judge_dataset with:
         rule="judge_dataset",
     log:
         "results/logs/judge/dataset_slide_loop_{fold}.log",
-
-
-def judge_sim(wildcards):
-    return f"{JUDGE_DIR}/sim/{wildcards.twin}/manifest.json"
 
 
 use rule train as judge_train with:
