@@ -21,6 +21,7 @@ from omegaconf import DictConfig, OmegaConf
 from palpation.apps.slide_loop import select
 from palpation.config_check import app_main
 from palpation.io import csv_text, read_json, read_npz, save_json, save_npz, save_text
+from palpation.loop.folds import trial_folds
 from palpation.loop.slide_twins import heldout_trials, read_slide_loop, schedule_of, score, write_fold_twin
 from palpation.measured_sequences import load_sequence_set
 from palpation.metrics.scores import load_scores
@@ -61,16 +62,20 @@ def slides(cfg: DictConfig) -> dict:
     return out
 
 
-def _member(c: dict, name: str, fold: str | None, replayed: dict) -> Member:
+def _member(c: dict, name: str, fold: str | None, n_trials: int) -> Member:
+    """A fold twin stands for its whole parity class of the Silicone trials (loop.folds), also those outside
+    the slide loop's cut, so that the cross-fitted pool covers every trial, as at the paper size."""
     root = Path(c["runs"][name if fold is None else f"{name}_{fold}"])
     scores = {exp: {s: load_scores(run_dir(root, c["experiments"][exp], c["clip_len"], s) / "scores.npz")
                     for s in c["seeds"]} for exp in ("silicone", "meat")}
-    return Member(replayed["fitted_trials"], scores["silicone"], scores["meat"])
+    own = [] if fold is None else [t + 1 for t in trial_folds(list(range(1, n_trials + 1)))[fold]]
+    return Member(own, scores["silicone"], scores["meat"])
 
 
 def table(cfg: DictConfig) -> dict:
     c = OmegaConf.to_container(cfg, resolve=True)
     candidates, replays = [], {}
+    n_trials = load_sequence_set(c["sequences"]).n_trials
     for name, spec in c["candidates"].items():
         folds = spec.get("folds") or [None]
         reps = [read_json(c["slides"][name if f is None else f"{name}_{f}"], "rerun rule judge_slides")
@@ -79,7 +84,7 @@ def table(cfg: DictConfig) -> dict:
         trials = [t for r in reps for t in r["trials"]]
         mae = [m for r in reps for m in r["mae_px"]]
         candidates.append(Candidate(
-            twin=name, fitted_on=spec["fitted_on"], members=[_member(c, name, f, r) for f, r in zip(folds, reps)],
+            twin=name, fitted_on=spec["fitted_on"], members=[_member(c, name, f, n_trials) for f in folds],
             heldout_slide_mae_px=float(np.mean(mae)) if mae else float("nan"),
             vessel_ratio_sim=float(np.mean([r["vessel_ratio_sim"] for r in reps])),
             vessel_ratio_real=float(np.mean([r["vessel_ratio_real"] for r in reps]))))
@@ -87,7 +92,8 @@ def table(cfg: DictConfig) -> dict:
                  sorted(trials))
     df = selection_table(candidates)
     save_text(c["out"]["csv"], csv_text(df.to_dict("records"), COLUMNS, 4, na_rep="nan"))
-    rows = [[r[k] if not isinstance(r[k], float) else f"{r[k]:.3f}" for k in COLUMNS] for r in df.to_dict("records")]
+    rows = [[str(r[k]).replace("|", "/") if not isinstance(r[k], float) else f"{r[k]:.3f}" for k in COLUMNS]
+            for r in df.to_dict("records")]
     save_text(c["out"]["md"], f"# Twin on the task ({c['profile']} profile)\n\n" + markdown(list(COLUMNS), rows))
     chosen = str(df.loc[df["chosen"], "twin"].iloc[0])
     _figure(c, chosen, replays[chosen])

@@ -38,7 +38,7 @@ def aim_checks(df: pd.DataFrame) -> list[tuple[str, str, float, str, float, floa
 
 
 def twin_selection_section(df: pd.DataFrame) -> Section:
-    rows = [[r["twin"], r["fitted_on"], num(r["heldout_slide_mae_px"], 3),
+    rows = [[r["twin"], str(r["fitted_on"]).replace("|", "/"), num(r["heldout_slide_mae_px"], 3),
              f"{num(r['vessel_ratio_sim'], 2)} / {num(r['vessel_ratio_real'], 2)}", num(r["silicone_ap_crossfit"]),
              num(r["silicone_auroc_crossfit"]), num(r["meat_ap"]), num(r["meat_auroc"]),
              f"{100 * float(r['silicone_pos_share_05']):.1f} %", int(r["seeds"]),
