@@ -16,6 +16,7 @@ include: "workflow/rules/loop.smk"
 include: "workflow/rules/slides.smk"
 include: "workflow/rules/dataset.smk"
 include: "workflow/rules/train.smk"
+include: "workflow/rules/judge.smk"
 include: "workflow/rules/maps.smk"
 include: "workflow/rules/recipe.smk"
 include: "workflow/rules/results_page.smk"
@@ -38,6 +39,7 @@ rule all:
         plain(TWIN_ABLATION_FILES),  # common.smk: empty where the profile skips the dataset-twin ablation
         plain(rules.vessel_maps.output),
         plain(RECIPE_REPORT_FILES),  # common.smk: empty where the profile skips the recipe ablation
+        plain(JUDGE_FILES),  # judge.smk: empty where the profile skips the downstream judge (judge.seeds [])
         plain(rules.results_page.output),
         killed_outputs(),
 

@@ -252,12 +252,24 @@ def test_changed_config_reruns_exactly_the_affected_rules(runs):
         cfg["train"]["sizes"]["large"]["train_batches"] += 1
         return yaml.safe_dump(cfg)
 
-    profile = yaml.safe_load((work / "conf/workflow/tiny.yaml").read_text())["train"]
-    large = [e for e in profile["experiments"]
-             if "override /model: large" in (work / f"conf/experiment/{e}.yaml").read_text()]
+    tiny = yaml.safe_load((work / "conf/workflow/tiny.yaml").read_text())
+    profile = tiny["train"]
+
+    def is_large(e):
+        return "override /model: large" in (work / f"conf/experiment/{e}.yaml").read_text()
+
+    large = [e for e in profile["experiments"] if is_large(e)]
     assert 0 < len(large) < len(profile["experiments"])  # the edit must leave a train job alone
-    assert edit_reruns(work, "conf/workflow/tiny.yaml", bigger_large_model) == Counter(
-        train=len(large) * len(profile["seeds"]), train_report=1, vessel_maps=1, results_page=1, all=1)
+    expected = Counter(train_report=1, vessel_maps=1, results_page=1, all=1)
+    main = {(e, s) for e in large for s in profile["seeds"]}
+    judge_seeds = tiny.get("judge", {}).get("seeds", [])
+    judged = [e for e in ("A-to-B", "A-to-C") if is_large(e)]  # judge.smk: JUDGE_EXPERIMENTS
+    if judge_seeds:  # photo_loop = the main sweep's rule train; calibrated = train_twin_ablation; two fold twins
+        main |= {(e, s) for e in judged for s in judge_seeds}
+        expected.update(train_twin_ablation=len(judged) * len(judge_seeds),
+                        judge_train=2 * len(judged) * len(judge_seeds), twin_selection=1)
+    expected.update(train=len(main))
+    assert edit_reruns(work, "conf/workflow/tiny.yaml", bigger_large_model) == expected
     assert job_stats(snakemake(work, "-n")) == Counter(), "restoring the configs restores the state"
 
 

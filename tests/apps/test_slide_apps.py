@@ -10,7 +10,7 @@ from palpation.measured_sequences import make_sequence_set
 from palpation.paths import REPO_ROOT
 
 
-@pytest.mark.parametrize("app", ["silicone_sequences", "slide_loop"])
+@pytest.mark.parametrize("app", ["silicone_sequences", "slide_loop", "twin_judge"])
 def test_shipped_configs_pass(app):
     import palpation.twin.config  # noqa: F401  (registers base_twin)
 

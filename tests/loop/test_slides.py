@@ -5,7 +5,7 @@ import pytest
 
 from palpation.loop.folds import other, trial_folds
 from palpation.loop.slide_loop import SlideLoopSettings, candidates_of, run_slide_loop
-from palpation.loop.slides import frame_mae, make_scene, plan_replay, replay, vessel_ratio
+from palpation.loop.slides import frame_mae, frame_mae_abs, make_scene, motion, plan_replay, replay, slide_modes, vessel_ratio
 from palpation.markers.template import rest_template
 from palpation.measured_sequences import make_sequence_set
 from palpation.twin.config import TwinConfig
@@ -66,7 +66,10 @@ def test_replay_markers_and_metrics():
     moved = np.linalg.norm(markers - binding.rest_px, axis=-1).mean(axis=-1)
     assert (moved[1] > moved[0]).all()  # a stiffer phantom deforms the dome more at the same depth
     mae = frame_mae(markers, s)
-    assert mae.shape == (2, 1) and (mae > 0).all()
+    assert mae.shape == (2, 1) and (mae > 0).all() and (frame_mae_abs(markers, s) > 0).all()
+    # a static shift of every marker changes the absolute error, not the motion error
+    np.testing.assert_allclose(frame_mae(markers + 3.0, s), mae, atol=1e-9)
+    assert not np.allclose(frame_mae_abs(markers + 3.0, s), frame_mae_abs(markers, s))
     assert np.isfinite(vessel_ratio(markers[0], s.labels))
 
 
@@ -74,12 +77,12 @@ def test_rounds_pick_the_effect_that_lowers_the_fitted_error():
     s = toy_set(4, 2)
     truth = s.markers.astype(np.float64)
 
-    def evaluate(part, cands):  # a fake twin: the error shrinks as k_f nears 3e7 and mu nears 0.8
+    def evaluate(part, cands):  # a fake twin: its motion nears the real one as k_f nears 3e7 and mu nears 0.8
         out = []
         for c in cands:
             err = abs(np.log10(c.get("k_f", 1e7) / 3e7)) + abs(c.get("mu", 0.0) - 0.8)
             idx = [int(t["name"][1:]) - 1 for t in part.trials]
-            out.append(truth[idx] + err)
+            out.append(truth[idx] + 5.0 + err * motion(truth[idx]))  # + a static offset the residual ignores
         return np.stack(out), np.zeros((len(cands), part.n_trials), bool)
 
     settings = SlideLoopSettings(effects={"compliant_phantom": {"k_f": [3e6, 3e7]}, "friction": {"mu": [0.3, 0.8]},
@@ -92,9 +95,11 @@ def test_rounds_pick_the_effect_that_lowers_the_fitted_error():
         fr = [r for r in rows if r["fold"] == fold]
         assert [r["effect_added"] for r in fr] == ["none", "friction", "compliant_phantom"]  # then nothing helps
         assert fr[-1]["mae_fit_px"] < fr[0]["mae_fit_px"] and fr[-1]["mae_heldout_px"] < fr[0]["mae_heldout_px"]
+        assert fr[-1]["mae_abs_heldout_px"] > 4.0  # the offset stays in the absolute error
     assert result["folds"] == {"odd": [1, 3], "even": [2, 4]}
-    modes = rows[0]["modes_heldout"]  # a uniform offset of the fake twin: all translation
-    assert modes["share_translation"] == pytest.approx(1.0) and modes["mae_over_vessel_px"] > 0
+    assert rows[0]["modes_heldout"]["mae_over_vessel_px"] > 0
+    modes = slide_modes(truth + 2.0, s)  # a uniform offset: all translation, no motion error
+    assert modes["share_translation"] == pytest.approx(1.0) and modes["mae_over_vessel_px"] == pytest.approx(0.0)
     with pytest.raises(ValueError, match="leaves its physical bounds"):
         SlideLoopSettings(effects={"f": {"mu": [3.0]}}).validate()
     with pytest.raises(ValueError, match="unknown parameter 'young'"):

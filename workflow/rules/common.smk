@@ -66,6 +66,7 @@ TWIN_ABL_RUN = str(run_dir(f"{TRAIN_DIR}/twin_calibrated", "{exp}", "{clip_len}"
 TWIN_ABLATION_FILES = (
     [f"{TRAIN_REPORT}/twin_ablation.csv", f"{TRAIN_REPORT}/twin_ablation.md"] if TWIN_ABL["seeds"] else []
 )
+JUDGE = config["judge"]  # issue 12, judge.smk: the downstream judge of the candidate twins (seeds [] skips it)
 MAPS_CONFIGS = config["maps"].get("configs", TRAIN["experiments"])
 # The recipe ablation (issue 15, recipe.smk): runs <RECIPE_DIR>/<recipe>/<switch_off>/<exp>/L<n>/seed<s>/
 RECIPE_ABL = TRAIN["recipe_ablation"]
@@ -205,6 +206,40 @@ def maps_inputs(wildcards):
         inputs["checkpoints"] = maps_runs("checkpoint.pt", tested_on_sim)
         inputs["slide"] = rules.simulate_vessel_slide.output.manifest
     return inputs
+
+
+
+# The downstream judge of issue 12 (judge.smk): candidate twins, their fits, Sim sets and training runs.
+JUDGE_DIR = "results/judge"
+JUDGE_FOLDS = ["odd", "even"]
+JUDGE_TWINS = ["calibrated", "photo_loop"] + [f"slide_loop_{f}" for f in JUDGE_FOLDS]
+JUDGE_RUN = str(run_dir(f"{JUDGE_DIR}/train/{{twin}}", "{exp}", "{clip_len}", "{seed}"))
+JUDGE_EXPERIMENTS = ["A-to-B", "A-to-C"]  # Sim -> Silicone (cross-fitted), Sim -> Meat
+JUDGE_FILES = (
+    [f"{JUDGE_DIR}/{n}" for n in ("twin_selection.csv", "twin_selection.md", "slide_motion.png", "slide_motion.pdf")]
+    if JUDGE["seeds"] else []
+)
+
+
+def judge_fit(twin):
+    if twin == "calibrated":
+        return rules.calibrate.output.fit
+    if twin == "photo_loop":
+        return rules.loop.output.fit
+    return f"{JUDGE_DIR}/twins/{twin}/twin_fit/fitted.yaml"
+
+
+def judge_runs_root(twin):
+    return {"calibrated": f"{TRAIN_DIR}/twin_calibrated", "photo_loop": TRAIN_DIR}.get(twin, f"{JUDGE_DIR}/train/{twin}")
+
+
+def judge_scores():
+    return [str(run_dir(judge_runs_root(t), e, TRAIN["clip_len"], s) / "scores.npz")
+            for t in JUDGE_TWINS for e in JUDGE_EXPERIMENTS for s in JUDGE["seeds"]]
+
+
+def judge_sim(wildcards):
+    return f"{JUDGE_DIR}/sim/{wildcards.twin}/manifest.json"
 
 
 # Every job knows its profile (MLflow tags runs with it) and writes no MLflow artefacts into ./mlruns.

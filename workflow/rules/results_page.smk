@@ -18,6 +18,7 @@ rule results_page:
         render=plain(rules.render_twin.output.png),  # listed among the figures
         twin_ablation=TWIN_ABLATION_FILES,  # common.smk; empty where the profile skips the ablation
         recipe=RECIPE_REPORT_FILES,  # common.smk; empty where the profile skips the recipe ablation
+        judge=JUDGE_FILES,  # common.smk; empty where the profile skips the downstream judge (issue 12)
         conf=conf_files("results_page"),
         explanations="conf/results_page/explanations.yaml",
         folders="conf/results_page/folders.yaml",

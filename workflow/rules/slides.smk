@@ -1,8 +1,8 @@
 # Issue 12: the residual loop on the real Silicone slides (docs/loop.md "Slides"). The sequence set comes
 # from rule silicone_sequences (silicone.smk); the twin of the scene is built inside the app.
 # Needs common.smk (PY, CONDA_ENV, hydra_dir, twin_mesh, TWIN_ARGS, GPU) and twin.smk (rule mesh).
-# Not in `all`: the quick size below runs on the CPU in ~10 min; the paper size needs the GPU
-# (trials=null frames=null twin=reference twin.device=cuda).
+# In `all` only through the downstream judge (judge.smk; judge.seeds): the profile's judge.twin and
+# judge.slide_loop set the twin preset and the size (paper: all trials and frames on the GPU).
 
 
 rule slide_loop:
@@ -16,7 +16,7 @@ rule slide_loop:
     params:
         rule="slide_loop",
         py=PY,
-        twin=TWIN_ARGS,
+        twin=f"{TWIN_ARGS} {JUDGE['twin']} {JUDGE['slide_loop']}".strip(),  # profile's judge: twin preset, size
         stem=lambda wildcards, input: input.npz[: -len(".npz")],
         hydra=lambda wildcards, output: hydra_dir(output.csv),
     resources:

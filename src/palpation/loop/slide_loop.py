@@ -17,12 +17,14 @@ from typing import Callable
 import numpy as np
 
 from palpation.loop.folds import other, trial_folds
-from palpation.loop.slides import SCHEDULE_KEYS, frame_mae, slide_modes, vessel_ratio
+from palpation.loop.slides import SCHEDULE_KEYS, frame_mae, frame_mae_abs, slide_modes, vessel_ratio
 from palpation.measured_sequences import SequenceSet
 from palpation.twin.parameters import PARAMETERS
 
 log = logging.getLogger(__name__)
-COLUMNS = ("fold", "round", "effect_added", "mae_fit_px", "mae_heldout_px", "vessel_ratio_sim", "vessel_ratio_real")
+# mae_*: marker motion about each trial's median (loop.slides.frame_mae); mae_abs_heldout_px: the absolute error
+COLUMNS = ("fold", "round", "effect_added", "mae_fit_px", "mae_heldout_px", "vessel_ratio_sim", "vessel_ratio_real",
+           "mae_abs_heldout_px")
 Evaluate = Callable[[SequenceSet, list[dict]], tuple[np.ndarray, np.ndarray]]  # -> markers (C,T,F,127,2), failed (C,T)
 
 
@@ -76,9 +78,11 @@ def run_fold(evaluate: Evaluate, fit: SequenceSet, held: SequenceSet, settings: 
         m_held, mae_held = _score(evaluate, held, [current])
         r = {"fold": fold, "round": k, "effect_added": effect, "mae_fit_px": float(mae_fit),
              "mae_heldout_px": float(mae_held[0]), "vessel_ratio_sim": vessel_ratio(m_held[0], held.labels),
-             "vessel_ratio_real": real_ratio, "modes_heldout": slide_modes(m_held[0], held)}
-        log.info("fold %s round %d (%s): fit %.3f px, held-out %.3f px, vessel ratio sim %.3f / real %.3f",
-                 fold, k, effect, r["mae_fit_px"], r["mae_heldout_px"], r["vessel_ratio_sim"], real_ratio)
+             "vessel_ratio_real": real_ratio, "modes_heldout": slide_modes(m_held[0], held),
+             "mae_abs_heldout_px": float(frame_mae_abs(m_held[0], held).mean())}
+        log.info("fold %s round %d (%s): motion MAE fit %.3f px, held-out %.3f px (absolute %.3f px), "
+                 "vessel ratio sim %.3f / real %.3f", fold, k, effect, r["mae_fit_px"], r["mae_heldout_px"],
+                 r["mae_abs_heldout_px"], r["vessel_ratio_sim"], real_ratio)
         return r
 
     _, mae0 = _score(evaluate, fit, [current])

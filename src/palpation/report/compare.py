@@ -48,6 +48,10 @@ SOURCES = {
     "recipe_ablation": Source("recipe/report/recipe_ablation.csv",
                               ("config", "recipe", "switch_off", "seeds", "auroc_mean", "auroc_std", "ap_mean", "ap_std",
                                "pos_share_05", "ece", "d_bar_mm"), "recipe_report"),
+    "twin_selection": Source("judge/twin_selection.csv",
+                             ("twin", "fitted_on", "heldout_slide_mae_px", "vessel_ratio_sim", "vessel_ratio_real",
+                              "silicone_ap_crossfit", "silicone_auroc_crossfit", "meat_ap", "meat_auroc",
+                              "silicone_pos_share_05", "seeds", "chosen"), "twin_selection"),
 }
 
 TITLES = {
@@ -60,6 +64,7 @@ TITLES = {
     "table4_maps": "Table 4, lower half: vessel maps",
     "twin_ablation": "Twin ablation: which twin made the Sim set",
     "recipe_ablation": "Training recipe: reference vs robust (issue 15)",
+    "twin_selection": "Twin on the task (issue 12)",
 }
 
 

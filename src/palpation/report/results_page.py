@@ -22,11 +22,12 @@ from palpation.io import save_text
 from palpation.report import page_training as training
 from palpation.report import page_twin as twin
 from palpation.report.compare import SOURCES, TITLES, Section, read_json, read_table
+from palpation.report.page_judge import twin_selection_section
 from palpation.report.page_recipe import recipe_ablation_section
 from palpation.report.markdown import markdown
 
 ORDER = ("data", "calibration", "loop", "seed_sweep", "table3", "table4_markers", "table4_maps", "twin_ablation",
-         "recipe_ablation")
+         "recipe_ablation", "twin_selection")
 FIGURES = (  # (caption, path under the results root; a glob lists every match)
     ("Fig. 4: fitted twin vs the photos", "calibration/fig4.png"),
     ("Fig. 4 at the paper's parameters", "calibration/fig4_paper.png"),
@@ -43,6 +44,7 @@ FIGURES = (  # (caption, path under the results root; a glob lists every match)
     ("Twin renders", "twin/render/markers.png"),
     ("Reliability of the test scores, reference vs robust recipe", "recipe/report/reliability.png"),
     ("Seed-ensemble vessel maps: mean, spread, unsure pixels, coverage-precision", "recipe/report/uncertainty_maps.png"),
+    ("Twin on the task: real vs twin marker motion over one Silicone trial", "judge/slide_motion.png"),
 )
 WHEN_KEYS = {"configs", "metrics", "direction", "profiles"}
 DIRECTIONS = {"below": -1, "above": 1, "off": 0}
@@ -152,6 +154,7 @@ def sections(root: Path, k: float = 2.0) -> dict[str, Section | None]:
                                                     read_json(root / "maps" / "silicone_pose_check.json")),
         "twin_ablation": lambda: training.twin_ablation_section(t["twin_ablation"], k),
         "recipe_ablation": lambda: recipe_ablation_section(t["recipe_ablation"]),
+        "twin_selection": lambda: twin_selection_section(t["twin_selection"]),
     }
     return {key: build[key]() if t[key] is not None else None for key in ORDER}
 

@@ -1,0 +1,59 @@
+"""Results-page section "Twin on the task" (issue 12): the candidate twins judged downstream, the choice by
+held-out real-slide motion MAE, and the issue's aims checked (where missed, by how much)."""
+
+from __future__ import annotations
+
+import math
+
+import pandas as pd
+
+from palpation.report.compare import TITLES, Gap, Section
+from palpation.report.markdown import markdown, num
+
+# (column, sense, target, row): the issue's aims; row "chosen" = the chosen twin's row
+AIMS = (("silicone_ap_crossfit", ">=", 0.36, "chosen"), ("meat_ap", ">=", 0.26, "chosen"),
+        ("silicone_pos_share_05", "<=", 0.40, "chosen"))
+MAE_DROP = 0.30  # the slide-loop twin's held-out MAE >= 30 % below the calibrated twin's
+
+
+def _truthy(v) -> bool:
+    return str(v).strip().lower() in ("true", "1")
+
+
+def aim_checks(df: pd.DataFrame) -> list[tuple[str, str, float, str, float, float]]:
+    """(twin, column, value, sense, target, miss) of every aim the table can check; miss 0 = met."""
+    out = []
+    chosen = df[df["chosen"].map(_truthy)]
+    for col, sense, target, _ in AIMS:
+        for _, r in chosen.iterrows():
+            v = float(r[col])
+            if not math.isnan(v):
+                out.append((r["twin"], col, v, sense, target,
+                            max(0.0, target - v) if sense == ">=" else max(0.0, v - target)))
+    by = df.set_index("twin")["heldout_slide_mae_px"].astype(float)
+    if {"slide_loop", "calibrated"} <= set(by.index) and by["calibrated"] > 0:
+        drop = 1 - by["slide_loop"] / by["calibrated"]
+        out.append(("slide_loop", "heldout MAE drop vs calibrated", drop, ">=", MAE_DROP, max(0.0, MAE_DROP - drop)))
+    return out
+
+
+def twin_selection_section(df: pd.DataFrame) -> Section:
+    rows = [[r["twin"], str(r["fitted_on"]).replace("|", "/"), num(r["heldout_slide_mae_px"], 3),
+             f"{num(r['vessel_ratio_sim'], 2)} / {num(r['vessel_ratio_real'], 2)}", num(r["silicone_ap_crossfit"]),
+             num(r["silicone_auroc_crossfit"]), num(r["meat_ap"]), num(r["meat_auroc"]),
+             f"{100 * float(r['silicone_pos_share_05']):.1f} %", int(r["seeds"]),
+             "**yes**" if _truthy(r["chosen"]) else ""] for _, r in df.iterrows()]
+    bullets, gaps = [], []
+    for twin, col, v, sense, target, miss in aim_checks(df):
+        state = "met" if miss == 0 else f"**missed by {miss:.3g}**"
+        bullets.append(f"{twin}: {col} {v:.3g} (aim {sense} {target:g}): {state}.")
+        gaps.append(Gap(twin, col, -miss if sense == ">=" else miss, miss == 0))
+    body = ("Each candidate twin made a Sim set; A-to-B and A-to-C models were trained on it (mean over seeds). "
+            "Silicone is cross-fitted: each trial is scored only by models whose twin never saw it (the slide "
+            "loop's fold-odd twin scores the even trials and back), pooled over the 10 trials. The held-out slide "
+            "MAE is the error of marker motion about each trial's median on real slides the twin was not fitted "
+            "on; the `chosen` twin has the lowest (no test label is used). Figure: `judge/slide_motion.png`.\n\n"
+            + markdown(["Twin", "Fitted on", "Held-out slide MAE (px)", "Vessel ratio sim / real",
+                        "Silicone AP (x-fit)", "Silicone AUROC (x-fit)", "Meat AP", "Meat AUROC",
+                        "Silicone positive at 0.5", "Seeds", "Chosen"], rows))
+    return Section("twin_selection", TITLES["twin_selection"], body, bullets, gaps, set(df["twin"]))

@@ -1,0 +1,109 @@
+"""The downstream judge of issue 12: which twin makes the Sim set (docs/loop.md "Twin on the task").
+
+Each candidate twin has Sim->Silicone (A-to-B) and Sim->Meat (A-to-C) models over seeds. Silicone scores are
+cross-fitted: a Silicone trial counts only from models whose twin never saw it. A twin fitted on the slides
+of one fold (slide_loop, per fold) scores the other fold's trials; the pooled 10-trial AP/AUROC then come from
+the two fold twins' models together. A twin fitted on no Silicone trial (calibrated, photo_loop) scores all.
+Meat is never fitted on: every model of a candidate scores it. The choice uses the held-out real-slide
+motion MAE only (a physics criterion, no test label): the candidate with the lowest one is `chosen`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from sklearn.metrics import average_precision_score, roc_auc_score
+
+from palpation.markers.lattice import N_MARKERS
+from palpation.metrics.scores import Scores
+
+COLUMNS = ("twin", "fitted_on", "heldout_slide_mae_px", "vessel_ratio_sim", "vessel_ratio_real",
+           "silicone_ap_crossfit", "silicone_auroc_crossfit", "meat_ap", "meat_auroc", "silicone_pos_share_05",
+           "seeds", "chosen")
+
+
+@dataclass
+class Member:
+    """One twin of a candidate: the Silicone trials (1-based) it was fitted on and its models' scores."""
+    fitted_trials: list[int]
+    silicone: dict[int, Scores]  # seed -> A-to-B scores
+    meat: dict[int, Scores]  # seed -> A-to-C scores
+
+
+@dataclass
+class Candidate:
+    twin: str
+    fitted_on: str  # in words, e.g. "flat photos" or "Silicone trials odd | even (cross-fitted)"
+    members: list[Member]
+    heldout_slide_mae_px: float
+    vessel_ratio_sim: float
+    vessel_ratio_real: float
+
+
+def _trial_of(scores: Scores) -> np.ndarray:
+    """The 1-based Silicone trial of every score (the set's sequence i is trial i + 1, apps.silicone)."""
+    return np.repeat(scores.sequence + 1, N_MARKERS)
+
+
+def crossfit(members: list[Member], seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Pooled Silicone (probs, labels) of one seed: each trial from the members that were not fitted on it.
+    A trial no member may score, or one several may, is an error: the folds must partition the trials."""
+    probs, labels, owner = [], [], {}
+    for k, m in enumerate(members):
+        s = m.silicone[seed]
+        trial = _trial_of(s)
+        keep = ~np.isin(trial, m.fitted_trials)
+        for t in np.unique(trial[keep]).tolist():
+            if t in owner:
+                raise ValueError(f"Silicone trial {t} is held out of two twins' folds ({owner[t]} and {k}); "
+                                 "cross-fitting needs folds that partition the trials (loop.folds)")
+            owner[t] = k
+        probs.append(s.probs[keep])
+        labels.append(s.labels[keep])
+    every = set(np.unique(_trial_of(members[0].silicone[seed])).tolist())
+    if set(owner) != every:
+        raise ValueError(f"Silicone trials {sorted(every - set(owner))} are scored by no twin that never saw them; "
+                         "each trial must be held out of one fold's twin")
+    return np.concatenate(probs), np.concatenate(labels)
+
+
+def _metrics(probs: np.ndarray, labels: np.ndarray) -> tuple[float, float]:
+    if labels.min() == labels.max():
+        return float("nan"), float("nan")
+    return float(average_precision_score(labels, probs)), float(roc_auc_score(labels, probs))
+
+
+def candidate_row(c: Candidate) -> dict:
+    """One row (COLUMNS, `chosen` left False): seed means of the cross-fitted Silicone and the Meat metrics."""
+    seeds = sorted(set.intersection(*(set(m.silicone) & set(m.meat) for m in c.members)))
+    if not seeds:
+        raise ValueError(f"twin {c.twin}: no seed has both A-to-B and A-to-C scores for every member twin")
+    sil, meat, share = [], [], []
+    for seed in seeds:
+        p, y = crossfit(c.members, seed)
+        sil.append(_metrics(p, y))
+        share.append(float((p >= 0.5).mean()))
+        meat += [_metrics(m.meat[seed].probs, m.meat[seed].labels) for m in c.members]
+    return {"twin": c.twin, "fitted_on": c.fitted_on, "heldout_slide_mae_px": c.heldout_slide_mae_px,
+            "vessel_ratio_sim": c.vessel_ratio_sim, "vessel_ratio_real": c.vessel_ratio_real,
+            "silicone_ap_crossfit": float(np.mean([a for a, _ in sil])),
+            "silicone_auroc_crossfit": float(np.mean([r for _, r in sil])),
+            "meat_ap": float(np.mean([a for a, _ in meat])), "meat_auroc": float(np.mean([r for _, r in meat])),
+            "silicone_pos_share_05": float(np.mean(share)), "seeds": len(seeds), "chosen": False}
+
+
+def selection_table(candidates: list[Candidate]) -> pd.DataFrame:
+    """One row per candidate; `chosen` on the lowest held-out slide motion MAE (test labels play no part)."""
+    if not candidates:
+        raise ValueError("twin selection: no candidate twins")
+    names = [c.twin for c in candidates]
+    if len(set(names)) != len(names):
+        raise ValueError(f"twin selection: candidate names repeat: {names}")
+    table = pd.DataFrame([candidate_row(c) for c in candidates], columns=list(COLUMNS))
+    mae = table["heldout_slide_mae_px"].to_numpy(float)
+    if not np.isfinite(mae).any():
+        raise ValueError("twin selection: no candidate has a finite held-out slide MAE to choose by")
+    table.loc[int(np.nanargmin(mae)), "chosen"] = True
+    return table

@@ -1,0 +1,131 @@
+# Issue 12: the downstream judge (docs/loop.md "Twin on the task"). Each candidate twin gets a Sim set and
+# A-to-B / A-to-C models (judge.seeds); Silicone trials are scored cross-fitted (a fold twin's models only on
+# the other fold's trials); the twin is chosen by its held-out real-slide motion MAE (no test labels).
+# Candidates: calibrated (calibrate.smk), photo_loop (loop.smk), slide_loop_odd / slide_loop_even (the
+# slide loop's fold twins, slides.smk). Reuses the Sim sets and runs that exist: photo_loop = the main
+# sweep (results/train), calibrated = the twin ablation's runs (results/train/twin_calibrated).
+# Needs common.smk (JUDGE*, judge_* helpers, PY, TWIN_ARGS, fit_overrides, hydra_dir) and the rule files above.
+# Opt-in: judge.seeds [] (quick) leaves it out of `all`; the paper and tiny profiles turn it on.
+
+JUDGE_CONF = conf_files("twin_judge", {"twin/mesh": config["twin_resolution"]})
+
+
+rule judge_fold_twin:
+    input:
+        json=rules.slide_loop.output.json,
+        conf=JUDGE_CONF,
+    output:
+        fit=f"{JUDGE_DIR}/twins/slide_loop_{{fold}}/twin_fit/fitted.yaml",
+    wildcard_constraints:
+        fold="|".join(JUDGE_FOLDS),
+    params:
+        rule="judge_fold_twin",
+        py=PY,
+        hydra=lambda wildcards, output: hydra_dir(output.fit),
+    log:
+        "results/logs/judge/fold_twin_{fold}.log",
+    conda:
+        CONDA_ENV
+    shell:
+        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.twin_judge task=fold_twin fold={wildcards.fold}"
+        " slide_loop={input.json} out.fit={output.fit} {params.hydra} > {log} 2>&1"
+
+
+rule judge_slides:
+    input:
+        fit=lambda wildcards: judge_fit(wildcards.twin),
+        json=rules.slide_loop.output.json,
+        npz=rules.silicone_sequences.output.npz,
+        mesh=twin_mesh(),
+        conf=JUDGE_CONF,
+    output:
+        json=f"{JUDGE_DIR}/slides/{{twin}}.json",
+        npz=f"{JUDGE_DIR}/slides/{{twin}}.npz",
+    wildcard_constraints:
+        twin="|".join(JUDGE_TWINS),
+    params:
+        rule="judge_slides",
+        py=PY,
+        twin=f"{TWIN_ARGS} {JUDGE['twin']}".strip(),
+        fold=lambda wildcards: wildcards.twin.split("_")[-1] if wildcards.twin.startswith("slide_loop_") else "null",
+        fit_args=lambda wildcards, input: fit_overrides(input.fit),
+        stem=lambda wildcards, input: input.npz[: -len(".npz")],
+        hydra=lambda wildcards, output: hydra_dir(output.json),
+    resources:
+        gpu=GPU,
+    log:
+        "results/logs/judge/slides_{twin}.log",
+    conda:
+        CONDA_ENV
+    shell:
+        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.twin_judge task=slides name={wildcards.twin}"
+        " fold={params.fold} {params.twin} {params.fit_args} slide_loop={input.json} sequences={params.stem}"
+        " mesh={input.mesh} out.json={output.json} out.npz={output.npz} {params.hydra} > {log} 2>&1"
+
+
+# A fold twin's Sim set: the same draws as rule simulate_dataset, simulated with that twin.
+use rule simulate_dataset as judge_dataset with:
+    input:
+        mesh=twin_mesh(),
+        conf=rules.simulate_dataset.input.conf,
+        fit=f"{JUDGE_DIR}/twins/slide_loop_{{fold}}/twin_fit/fitted.yaml",
+    output:
+        manifest=f"{JUDGE_DIR}/sim/slide_loop_{{fold}}/manifest.json",
+    wildcard_constraints:
+        fold="|".join(JUDGE_FOLDS),
+    params:
+        rule="judge_dataset",
+    log:
+        "results/logs/judge/dataset_slide_loop_{fold}.log",
+
+
+use rule train as judge_train with:
+    input:
+        unpack(lambda wildcards: train_inputs(wildcards, judge_sim(wildcards))),
+    output:
+        metrics=f"{JUDGE_RUN}/metrics.json",
+        scores=f"{JUDGE_RUN}/scores.npz",
+        pr=f"{JUDGE_RUN}/pr.npz",
+        checkpoint=f"{JUDGE_RUN}/checkpoint.pt",
+    wildcard_constraints:
+        twin="|".join(f"slide_loop_{f}" for f in JUDGE_FOLDS),
+        exp="|".join(JUDGE_EXPERIMENTS),
+        clip_len=r"\d+",
+        seed=r"\d+",
+    log:
+        "results/logs/judge/train_{twin}_{exp}_L{clip_len}_seed{seed}.log",
+    params:
+        rule="judge_train",
+        overrides=lambda wildcards: train_overrides(wildcards, judge_sim(wildcards)),
+
+
+rule twin_selection:
+    input:
+        slides=expand(rules.judge_slides.output.json, twin=JUDGE_TWINS),
+        scores=judge_scores(),
+        npz=rules.silicone_sequences.output.npz,
+        conf=JUDGE_CONF,
+    output:
+        csv=f"{JUDGE_DIR}/twin_selection.csv",
+        md=f"{JUDGE_DIR}/twin_selection.md",
+        png=f"{JUDGE_DIR}/slide_motion.png",
+        pdf=f"{JUDGE_DIR}/slide_motion.pdf",
+    params:
+        rule="twin_selection",
+        py=PY,
+        profile=PROFILE,
+        seeds=yaml_list(JUDGE["seeds"]),
+        clip_len=TRAIN["clip_len"],
+        stem=lambda wildcards, input: input.npz[: -len(".npz")],
+        runs=" ".join(f"runs.{t}={judge_runs_root(t)}" for t in JUDGE_TWINS),
+        slides=" ".join(f"slides.{t}={JUDGE_DIR}/slides/{t}.json" for t in JUDGE_TWINS),
+        figure=lambda wildcards, output: output.png[: -len(".png")],
+        hydra=lambda wildcards, output: hydra_dir(output.csv),
+    log:
+        "results/logs/judge/twin_selection.log",
+    conda:
+        CONDA_ENV
+    shell:
+        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.twin_judge task=table profile={params.profile}"
+        " 'seeds={params.seeds}' clip_len={params.clip_len} sequences={params.stem} {params.runs} {params.slides}"
+        " out.csv={output.csv} out.md={output.md} out.figure={params.figure} {params.hydra} > {log} 2>&1"
