@@ -57,6 +57,17 @@ def test_dry_run_lists_the_whole_dag(tmp_path):
         assert f"rule {rule}:" in listing, f"{rule} has no job in the dry run's listing"
 
 
+def test_train_command_carries_the_profile_sizes_and_recipe(tmp_path):
+    """Every size knob of conf/workflow/quick.yaml reaches the train command, a null one as null (the whole
+    split; dropping it would leave the recipe's own value), with the profile's recipe and threads."""
+    quick = yaml.safe_load((REPO_ROOT / "conf" / "workflow" / "quick.yaml").read_text())["train"]
+    listing = dry_run(tmp_path, "-p", "results/train/A-to-B/L5/seed0/metrics.json")
+    (line,) = [ln for ln in listing.splitlines() if "palpation.apps.train experiment=A-to-B" in ln]
+    for k, v in quick["sizes"]["large"].items():
+        assert f"train.{k}={'null' if v is None else v} " in line
+    assert f"recipe={quick['recipe']} " in line and f"OMP_NUM_THREADS={quick['threads']} " in line
+
+
 def failing_dry_run(tmp_path: Path, *args: str) -> str:
     work = tmp_path / "wd"
     work.mkdir()

@@ -109,6 +109,13 @@ def test_recipes_compose_and_switch_off_restores_one_reference_value():
         assert all(getattr(off, k) == getattr(ref, k) for k in SWITCHES[name])
 
 
+def test_calibrated_recipe_is_the_reference_plus_platt_only():
+    """recipe=calibrated (the quick profile's) trains exactly as the reference and only rescales scores."""
+    ref, cal = _compose(["experiment=A-to-B"]), _compose(["experiment=A-to-B", "recipe=calibrated"])
+    differs = {f.name for f in dataclasses.fields(TrainConfig) if getattr(cal, f.name) != getattr(ref, f.name)}
+    assert differs == set(SWITCHES["calibration"]) and cal.calibration == "platt"
+
+
 def test_calibration_rescales_the_written_scores_only(train_sets, tmp_path):
     """calibration=platt: the same model (checkpoint bytes), scores = the fitted map of the raw ones."""
     from palpation.apps.train import run

@@ -140,12 +140,16 @@ def train_inputs(wildcards, sim=TRAIN_DATA["sim"]):
     return {**train_data(wildcards, sim), "conf": conf_files("train", choices)}
 
 
+def size_knobs(sizes):
+    """train.<knob>=<value> overrides; a null value is passed as null (train_batches/val_batches: the whole split)."""
+    return [f"train.{k}={'null' if v is None else v}" for k, v in sizes.items()]
+
+
 def train_overrides(wildcards, sim=TRAIN_DATA["sim"]):
     """Dataset paths and the profile's size knobs for this configuration's model, as Hydra overrides."""
     data = [f"data.{k}={v}" for k, v in train_data(wildcards, sim).items()]
     sizes = TRAIN["sizes"].get(EXPERIMENTS[wildcards.exp].model) or {}
-    knobs = [f"train.{k}={v}" for k, v in sizes.items() if v is not None]
-    return " ".join(data + knobs + [f"recipe={TRAIN['recipe']}"])
+    return " ".join(data + size_knobs(sizes) + [f"recipe={TRAIN['recipe']}"])
 
 
 def recipe_inputs(wildcards):
@@ -160,7 +164,7 @@ def recipe_overrides(wildcards):
 
     data = [f"data.{k}={v}" for k, v in train_data(wildcards).items()]
     sizes = (RECIPE_ABL["sizes"].get(wildcards.recipe) or {}).get(EXPERIMENTS[wildcards.exp].model) or {}
-    knobs = [f"train.{k}={v}" for k, v in sizes.items() if v is not None]
+    knobs = size_knobs(sizes)
     off = [] if wildcards.switch == "none" else switch_off(wildcards.switch)
     return " ".join(data + knobs + [f"recipe={wildcards.recipe}"] + off)
 
