@@ -2,7 +2,8 @@
 
 Outputs in `out_dir`: checkpoint.pt (weights + normalisation statistics + rest layout), scores.npz
 (`probs`, `labels` of the test central frames, their `sequence`, `frame` ids: palpation.metrics.scores),
-pr.npz (the test PR curve) and metrics.json.
+pr.npz (the test PR curve) and metrics.json. `run_jobs_together` does the same for several seeds of one
+configuration trained in one process (palpation.model.stacked), one output folder and MLflow run per seed.
 """
 
 from __future__ import annotations
