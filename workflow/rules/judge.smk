@@ -102,6 +102,7 @@ use rule train as judge_train with:
 rule twin_selection:
     input:
         slides=expand(rules.judge_slides.output.json, twin=JUDGE_TWINS),
+        markers=expand(rules.judge_slides.output.npz, twin=JUDGE_TWINS),  # the figure's replay
         scores=judge_scores(),
         npz=rules.silicone_sequences.output.npz,
         conf=JUDGE_CONF,
