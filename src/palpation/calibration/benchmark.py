@@ -84,6 +84,8 @@ def bench_objective(kind: str, mesh: SensorMesh, twin: TwinConfig, mset, n_trial
 
 
 def main(argv: list[str] | None = None) -> list[dict]:
+    # argparse, not a Hydra app (issue 16): a developer measurement outside the results DAG whose
+    # flags are sizes, devices and repeats, not experiment config (nothing to compose or sweep)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--device", default="cuda" if wp.is_cuda_available() else "cpu")
     parser.add_argument("--resolution", default="coarse", help="mesh: results/twin/mesh_<resolution>.npz")

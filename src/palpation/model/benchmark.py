@@ -103,6 +103,8 @@ def bench(job: TrainJob, seeds: list[int], work: Path) -> dict:
 
 
 def main(argv: list[str] | None = None) -> dict:
+    # argparse, not a Hydra app (issue 16): a developer measurement outside the results DAG whose
+    # flags are sizes, devices and repeats, not experiment config (nothing to compose or sweep)
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--device", default="cuda:0")
     ap.add_argument("--out", default="docs/results/bench_train.json")

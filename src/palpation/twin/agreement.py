@@ -55,6 +55,8 @@ def compare_devices(mesh: SensorMesh, devices: list[str], max_frames: int | None
 
 
 def main(argv: list[str] | None = None) -> int:
+    # argparse, not a Hydra app (issue 16): a developer measurement outside the results DAG whose
+    # flags are sizes, devices and repeats, not experiment config (nothing to compose or sweep)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--mesh", required=True, help="cached mesh npz (rule `mesh`)")
     parser.add_argument("--devices", nargs="+", default=["cpu", "cuda:0"],

@@ -125,6 +125,8 @@ if __name__ == "__main__":
 
     from palpation.twin.mesh import build_sensor_mesh
 
+    # argparse, not a Hydra app (issue 16): a developer measurement outside the results DAG whose
+    # flags are sizes, devices and repeats, not experiment config (nothing to compose or sweep)
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--resolution", default="coarse")

@@ -103,6 +103,8 @@ def device_name(device: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> list[dict]:
+    # argparse, not a Hydra app (issue 16): a developer measurement outside the results DAG whose
+    # flags are sizes, devices and repeats, not experiment config (nothing to compose or sweep)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--mesh-dir", type=Path, default=Path("results/twin"))
     parser.add_argument("--resolutions", nargs="+", default=["coarse", "reference"])
