@@ -163,6 +163,21 @@ class Gap:
     within: bool | None  # within seed noise; None where no noise scale exists
 
 
+def aim_miss(value: float, sense: str, target: float) -> float:
+    """How far `value` misses an issue's aim `sense target` (">=" or "<="); 0 where it is met."""
+    return max(0.0, target - value) if sense == ">=" else max(0.0, value - target)
+
+
+def aim_lines(checks, label) -> tuple[list[str], list[Gap]]:
+    """Bullets and gaps of aim checks (row, column, value, sense, target, miss); `label(row)` names the row."""
+    bullets, gaps = [], []
+    for row, col, v, sense, target, miss in checks:
+        state = "met" if miss == 0 else f"**missed by {miss:.3g}**"
+        bullets.append(f"{label(row)}: {col} {v:.3g} (aim {sense} {target:g}): {state}.")
+        gaps.append(Gap(row, col, -miss if sense == ">=" else miss, miss == 0))
+    return bullets, gaps
+
+
 @dataclass
 class Section:
     """One table of the page: its Markdown, the generated bullets and the differences behind them."""

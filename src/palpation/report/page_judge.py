@@ -7,7 +7,7 @@ import math
 
 import pandas as pd
 
-from palpation.report.compare import TITLES, Gap, Section
+from palpation.report.compare import TITLES, Section, aim_lines, aim_miss
 from palpation.report.markdown import markdown, num
 
 # (column, sense, target, row): the aims; row "chosen" = the chosen twin's row
@@ -28,12 +28,12 @@ def aim_checks(df: pd.DataFrame) -> list[tuple[str, str, float, str, float, floa
         for _, r in chosen.iterrows():
             v = float(r[col])
             if not math.isnan(v):
-                out.append((r["twin"], col, v, sense, target,
-                            max(0.0, target - v) if sense == ">=" else max(0.0, v - target)))
+                out.append((r["twin"], col, v, sense, target, aim_miss(v, sense, target)))
     by = df.set_index("twin")["heldout_slide_mae_px"].astype(float)
     if {"slide_loop", "calibrated"} <= set(by.index) and by["calibrated"] > 0:
         drop = 1 - by["slide_loop"] / by["calibrated"]
-        out.append(("slide_loop", "heldout MAE drop vs calibrated", drop, ">=", MAE_DROP, max(0.0, MAE_DROP - drop)))
+        out.append(("slide_loop", "heldout MAE drop vs calibrated", drop, ">=", MAE_DROP,
+                    aim_miss(drop, ">=", MAE_DROP)))
     return out
 
 
@@ -43,11 +43,7 @@ def twin_selection_section(df: pd.DataFrame) -> Section:
              num(r["silicone_auroc_crossfit"]), num(r["meat_ap"]), num(r["meat_auroc"]),
              f"{100 * float(r['silicone_pos_share_05']):.1f} %", int(r["seeds"]),
              "**yes**" if _truthy(r["chosen"]) else ""] for _, r in df.iterrows()]
-    bullets, gaps = [], []
-    for twin, col, v, sense, target, miss in aim_checks(df):
-        state = "met" if miss == 0 else f"**missed by {miss:.3g}**"
-        bullets.append(f"{twin}: {col} {v:.3g} (aim {sense} {target:g}): {state}.")
-        gaps.append(Gap(twin, col, -miss if sense == ">=" else miss, miss == 0))
+    bullets, gaps = aim_lines(aim_checks(df), str)
     body = ("Each candidate twin made a Sim set; A-to-B and A-to-C models were trained on it (mean over seeds). "
             "Silicone is cross-fitted: each trial is scored only by models whose twin never saw it (the slide "
             "loop's fold-odd twin scores the even trials and back), pooled over the 10 trials. The held-out slide "

@@ -7,7 +7,7 @@ import math
 
 import pandas as pd
 
-from palpation.report.compare import TITLES, Gap, Section
+from palpation.report.compare import TITLES, Section, aim_lines, aim_miss
 from palpation.report.markdown import markdown, num
 from palpation.report.page_training import title
 
@@ -27,8 +27,7 @@ def aim_checks(df: pd.DataFrame) -> list[tuple[str, str, float, str, float, floa
             v = float(r[col])
             if math.isnan(v):
                 continue
-            miss = max(0.0, target - v) if sense == ">=" else max(0.0, v - target)
-            out.append((r["config"], col, v, sense, target, miss))
+            out.append((r["config"], col, v, sense, target, aim_miss(v, sense, target)))
     return out
 
 
@@ -36,11 +35,7 @@ def recipe_ablation_section(df: pd.DataFrame) -> Section:
     rows = [[title(r["config"]), r["recipe"], r["switch_off"], int(r["seeds"]),
              f"{num(r['auroc_mean'])} ± {num(r['auroc_std'])}", f"{num(r['ap_mean'])} ± {num(r['ap_std'])}",
              f"{100 * r['pos_share_05']:.1f} %", num(r["ece"]), num(r["d_bar_mm"], 2)] for _, r in df.iterrows()]
-    bullets, gaps = [], []
-    for config, col, v, sense, target, miss in aim_checks(df):
-        state = "met" if miss == 0 else f"**missed by {miss:.3g}**"
-        bullets.append(f"{title(config)}, robust: {col} {v:.3g} (aim {sense} {target:g}): {state}.")
-        gaps.append(Gap(config, col, -miss if sense == ">=" else miss, miss == 0))
+    bullets, gaps = aim_lines(aim_checks(df), lambda config: f"{title(config)}, robust")
     body = ("Mean ± sample std over seeds of the recipe runs (`results/recipe/`). `switch_off` names the robust "
             "recipe's switch turned back to the reference value (`none`: the full recipe). Positive share at 0.5 "
             "and ECE are computed on the written test scores (calibrated where the recipe calibrates, on the "
