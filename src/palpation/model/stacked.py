@@ -36,12 +36,11 @@ from palpation.graph.batch import make_batch
 from palpation.graph.clips import ClipSet
 from palpation.graph.edges import ClipTopology
 from palpation.graph.features import clip_features
-from palpation.metrics.classification import confusion
 from palpation.model.config import ModelConfig, TrainConfig
 from palpation.model.evaluate import central_slice
 from palpation.model.stgnn import STGNN
-from palpation.model.train import (FitResult, focal_loss, grouped_parameters, norm_stats, seed_everything,
-                                   training_batch, val_fg_iou, val_score)
+from palpation.model.train import (FitResult, epoch_row, focal_loss, grouped_parameters, norm_stats,
+                                   seed_everything, training_batch)
 from palpation.progress import bar
 
 log = logging.getLogger(__name__)
@@ -234,12 +233,7 @@ def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology
 def _validate(s: SeedState, i: int, epoch: int, losses: list, step: int, stack: Stack, probs: np.ndarray,
               labels: np.ndarray, cfg: TrainConfig) -> None:
     """`fit`'s end of epoch for seed i from its val scores: keep the best weights, maybe stop early."""
-    score = val_score(probs, labels, cfg)
-    c = confusion(probs, labels, cfg.threshold)
-    row = {"epoch": epoch, "train/loss": float(np.mean(losses)),
-           "val/fg_iou": val_fg_iou(probs, labels, cfg.threshold), "val/tp": c["tp"], "val/fp": c["fp"]}
-    if cfg.select_metric != "fg_iou":
-        row[f"val/{cfg.select_metric}"] = score
+    row, score = epoch_row(epoch, losses, probs, labels, cfg)
     s.history.append(row)
     s.steps.append(({k: v for k, v in row.items() if k != "epoch"}, step))
     log.info("seed %d epoch %d: loss %.5f val %s %.4f", s.seed, epoch, row["train/loss"], cfg.select_metric, score)

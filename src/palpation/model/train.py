@@ -97,6 +97,19 @@ def val_score(probs: np.ndarray, labels: np.ndarray, cfg: TrainConfig) -> float:
     return float(average_precision_score(labels, probs)) if labels.any() else 0.0
 
 
+def epoch_row(epoch: int, losses: list, probs: np.ndarray, labels: np.ndarray,
+              cfg: TrainConfig) -> tuple[dict, float]:
+    """The end-of-epoch history row (train loss, val FG IoU/TP/FP and the selection metric) and the score that
+    selects the checkpoint; `fit` and `stacked.fit_seeds` log the same row."""
+    score = val_score(probs, labels, cfg)
+    c = confusion(probs, labels, cfg.threshold)
+    row = {"epoch": epoch, "train/loss": float(np.mean(losses)),
+           "val/fg_iou": val_fg_iou(probs, labels, cfg.threshold), "val/tp": c["tp"], "val/fp": c["fp"]}
+    if cfg.select_metric != "fg_iou":
+        row[f"val/{cfg.select_metric}"] = score
+    return row, score
+
+
 def training_batch(train: ClipSet, idx: np.ndarray, cfg: TrainConfig, rng: np.random.Generator):
     """Markers and labels of one augmented training batch. Draw order: rotations (the reference's only
     draw), then only the switches that are on, so the reference stream is untouched."""
@@ -159,12 +172,7 @@ def fit(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology, mode
         if sched:
             sched.step()
         probs, labels = predict(model, val, stats, rest, topo, cfg.batch_size, cfg.val_batches, cfg.device)
-        score = val_score(probs, labels, cfg)
-        c = confusion(probs, labels, cfg.threshold)
-        row = {"epoch": epoch, "train/loss": float(np.mean(losses)),
-               "val/fg_iou": val_fg_iou(probs, labels, cfg.threshold), "val/tp": c["tp"], "val/fp": c["fp"]}
-        if cfg.select_metric != "fg_iou":
-            row[f"val/{cfg.select_metric}"] = score
+        row, score = epoch_row(epoch, losses, probs, labels, cfg)
         history.append(row)
         log.info("epoch %d: loss %.5f val %s %.4f", epoch, row["train/loss"], cfg.select_metric, score)
         if log_metrics:
