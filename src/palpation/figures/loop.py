@@ -18,6 +18,16 @@ MODE_COLOURS = {"translation": "#4477aa", "rotation": "#66ccee", "radial": "#228
                 "stretch_shear": "#ccbb44", "local": "#ee6677"}
 
 
+def sensor_frame(ax, title: str) -> None:
+    """The dome's region of the sensor image (px, y down, no ticks), equal aspect, a small title."""
+    ax.set_xlim(640, 1440)
+    ax.set_ylim(990, 180)  # image coordinates: y down
+    ax.set_aspect("equal")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    ax.set_title(title, fontsize=8)
+
+
 def draw_quiver(ax, real_px: np.ndarray, sim_px: np.ndarray, title: str, scale_px: float = 5.0) -> None:
     """Arrows from each real marker along sim - real, magnified `scale_px` times (image y down)."""
     d = np.asarray(sim_px) - np.asarray(real_px)
@@ -26,12 +36,7 @@ def draw_quiver(ax, real_px: np.ndarray, sim_px: np.ndarray, title: str, scale_p
     ax.scatter(real_px[:, 0], real_px[:, 1], s=4, c="k")
     ax.quiver(real_px[:, 0], real_px[:, 1], d[:, 0], d[:, 1], angles="xy", scale_units="xy",
               scale=1.0 / scale_px, color="#cc3311", width=0.004)
-    ax.set_xlim(640, 1440)
-    ax.set_ylim(990, 180)  # image coordinates: y down
-    ax.set_aspect("equal")
-    ax.set_xticks([])
-    ax.set_yticks([])
-    ax.set_title(title, fontsize=8)
+    sensor_frame(ax, title)
 
 
 def _caption(dec: Decomposition) -> str:

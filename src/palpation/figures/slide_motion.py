@@ -13,6 +13,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from palpation.figures.loop import sensor_frame  # noqa: E402
 from palpation.io import save_figure  # noqa: E402
 from palpation.loop.slides import motion  # noqa: E402
 
@@ -24,12 +25,7 @@ def _panel(ax, markers: np.ndarray, over: np.ndarray, gain: float, title: str) -
         colour = "#cc3311" if over[i] else "0.55"
         ax.plot(path[:, i, 0], path[:, i, 1], "-", lw=0.8 if over[i] else 0.5, color=colour)
         ax.plot(path[-1, i, 0], path[-1, i, 1], ".", ms=2, color=colour)
-    ax.set_xlim(640, 1440)
-    ax.set_ylim(990, 180)  # image coordinates: y down
-    ax.set_aspect("equal")
-    ax.set_xticks([])
-    ax.set_yticks([])
-    ax.set_title(title, fontsize=8)
+    sensor_frame(ax, title)
 
 
 def slide_motion_figure(real: np.ndarray, sim: np.ndarray, labels: np.ndarray, path_stem, title: str,
