@@ -68,6 +68,11 @@ class IntegratorConfig:
     # slots: no atomics, deterministic on GPUs; SDF contact only), "auto" (gather on CUDA, scatter on
     # the CPU, where both give the same bits). docs/twin.md compares them.
     force_sum: str = "auto"
+    # "streamed": one launch per pass per substep, state in global memory (the reference path, and
+    # the CPU path); "resident": one launch per frame, each env's x, v, f in one block's shared
+    # memory (twin/resident.py, issue 17; SDF contact and the plain elastic kernel only)
+    kernel: str = "streamed"
+    block_dim: int = 256  # threads per env block of the resident kernel
 
 
 @dataclass
@@ -208,6 +213,13 @@ class TwinConfig:
         if self.integrator.force_sum == "gather" and self.contact.rule == "centroid":
             raise ValueError("twin.integrator.force_sum='gather' needs contact.rule='sdf' (the centroid "
                              "rule reads the scattered forces); use 'scatter' or 'auto'")
+        if self.integrator.kernel not in ("streamed", "resident"):
+            raise ValueError(f"twin.integrator.kernel={self.integrator.kernel!r}: use 'streamed' or 'resident'")
+        if self.integrator.kernel == "resident" and (self.contact.rule != "sdf" or self.layered):
+            raise ValueError("twin.integrator.kernel='resident' needs contact.rule='sdf' and the plain elastic "
+                             "kernel (material.shell_thickness=0, damping.per_env=false); use 'streamed'")
+        if not 1 <= self.integrator.block_dim <= 1024:
+            raise ValueError(f"twin.integrator.block_dim={self.integrator.block_dim}: use 1..1024 threads")
         if self.material.shell_thickness < 0 or self.material.shell_ratio <= 0:
             raise ValueError(f"twin.material: need shell_thickness >= 0 and shell_ratio > 0, got "
                              f"{self.material.shell_thickness}, {self.material.shell_ratio}")

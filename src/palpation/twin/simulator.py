@@ -22,6 +22,7 @@ from palpation.twin.integrate import (advance_frame, check_nodes, check_tets, in
                                       integrate_nodes, load_frame_poses, reset_velocities,
                                       set_control_velocity, snap_fixed_nodes)
 from palpation.twin.mesh import SensorMesh, build_vessel_points, morton_order, projected_node_area, shell_weights
+from palpation.twin.resident import ResidentLayout, launch_resident
 from palpation.twin.warp_runtime import init_warp
 from palpation.twin.parameters import CONTACT_KEYS, ENV_KEYS, LAYERED_KEYS, by_env_key, per_env_keys
 
@@ -69,6 +70,11 @@ class BatchedTwin:
             run_index[perm] = np.arange(len(perm))
         slots, start = force_slots(mesh.tets[moving_ix], needs_force, N, run_index)  # sums in mesh order
         moving_ix = moving_ix[np.argsort(run_index)]
+        self.resident = None  # the frame-resident kernel's layout (cfg.integrator.kernel, issue 17)
+        if cfg.integrator.kernel == "resident":
+            mesh_order = np.flatnonzero(moving)
+            self.resident = ResidentLayout(mesh.tets[mesh_order], rest_shape(mesh.nodes, mesh.tets[mesh_order])[0],
+                                           needs_force, dev)
         self.tet_order = np.concatenate([moving_ix, np.flatnonzero(~moving)])
         self.n_force_tets = len(moving_ix)
         tets = mesh.tets[self.tet_order]
@@ -306,8 +312,11 @@ class BatchedTwin:
                   inputs=[self.v_ctl, self.fixed, N, int(self.cfg.integrator.zero_velocity_each_frame)],
                   outputs=[self.v])
         self.contact_flag.zero_()
-        for _ in range(self.substeps):
-            self.substep()
+        if self.resident is not None:  # all substeps in one launch, one block per env
+            launch_resident(self, self.cfg.integrator.block_dim)
+        else:
+            for _ in range(self.substeps):
+                self.substep()
         wp.launch(snap_fixed_nodes, dim=n * N, device=dev, inputs=[self.x_u, self.fixed, N], outputs=[self.x])
 
     def substep(self) -> None:

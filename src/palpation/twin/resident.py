@@ -1,0 +1,180 @@
+"""Frame-resident FEM kernel (issue 17, `twin.integrator.kernel=resident`): one block per env.
+
+A block loads its env's x, v into shared-memory tiles, keeps f there too, runs all substeps of
+the frame, and writes x, v (and the last substep's f_c) back once. The elastic pass runs the
+moving tets colour by colour (no two tets of a colour share a node that needs its force), so the
+per-thread corner forces go into the shared f without atomics, in a fixed order: deterministic,
+and the same sums on the CPU (one lane, or cooperative fibers with `wp.config.enable_cpu_blocks`)
+as on a GPU. The sums run in colour order instead of the mesh order of the streamed gather, so
+the two paths differ by float32 rounding only. The per-tet and per-node arithmetic is the streamed
+kernels' own (`tet_forces`, `surface_contact_force`). Every `wp.tile_scatter_*` call ends with a
+block barrier: that is the only sync Warp 1.19 offers inside a loop, and it is what orders the
+passes (elastic -> node -> next substep). docs/twin.md gives the design and its roofline.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import warp as wp
+
+from palpation.twin.contact import ContactParams, surface_contact_force
+from palpation.twin.elasticity import tet_forces
+
+VEC3 = 12
+
+
+def color_tets(tets: np.ndarray, needs_force: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Greedy colouring in mesh order: no two tets of a colour share a node that needs its force.
+
+    Returns (order, start): tets[order] lists colour 0 first, each colour in mesh order, and colour
+    k is order[start[k]:start[k+1]]. Driven interior nodes are ignored: their force is discarded.
+    """
+    tets = np.asarray(tets)
+    used: list[set[int]] = [set() for _ in range(len(needs_force))]  # colours seen at each node
+    color = np.empty(len(tets), np.int64)
+    for t, corners in enumerate(tets):
+        nodes = [int(i) for i in corners if needs_force[i]]
+        taken = set().union(*(used[i] for i in nodes)) if nodes else set()
+        c = 0
+        while c in taken:
+            c += 1
+        color[t] = c
+        for i in nodes:
+            used[i].add(c)
+    order = np.argsort(color, kind="stable")
+    start = np.concatenate([[0], np.cumsum(np.bincount(color))]).astype(np.int32)
+    return order, start
+
+
+def shared_bytes(n_nodes: int) -> int:
+    """Shared memory of one block: x, v and f of its env (vec3 float32 tiles)."""
+    return 3 * n_nodes * VEC3
+
+
+@functools.lru_cache(maxsize=None)
+def resident_kernel(n_nodes: int):
+    """The frame kernel for meshes of `n_nodes` nodes (tile shapes are compile-time constants)."""
+
+    @wp.kernel(enable_backward=False, module="unique")
+    def frame_resident(
+        tets: wp.array2d[wp.int32],
+        dm_inv: wp.array[wp.mat33],
+        color_start: wp.array[wp.int32],
+        n_colors: int,
+        need: wp.array[wp.int32],
+        inv_mass: wp.array[float],
+        fixed: wp.array[wp.int32],
+        on_surface: wp.array[wp.int32],
+        env_mu: wp.array[float],
+        env_lam: wp.array[float],
+        alpha: float,
+        beta: float,
+        dt: float,
+        substeps: int,
+        p: ContactParams,
+        v_ctl: wp.array[wp.vec3],
+        x: wp.array[wp.vec3],
+        v: wp.array[wp.vec3],
+        f_c: wp.array[wp.vec3],
+        contact_flag: wp.array[wp.int32],
+    ):
+        env, lane = wp.tid()
+        nb = wp.block_dim()
+        off = env * n_nodes
+        xs = wp.tile_load(x, shape=n_nodes, offset=off, storage="shared")
+        vs = wp.tile_load(v, shape=n_nodes, offset=off, storage="shared")
+        fs = wp.tile_zeros(shape=n_nodes, dtype=wp.vec3, storage="shared")
+        mu = env_mu[env]
+        lam = env_lam[env]
+        zero = wp.vec3(0.0)
+        for s in range(substeps):
+            # elastic pass: colour by colour, one tet per lane, 4 non-atomic scatters (each a barrier)
+            for c in range(n_colors):
+                end = color_start[c + 1]
+                for base in range(color_start[c], end, nb):
+                    t = base + lane
+                    i0 = int(0)
+                    i1 = int(0)
+                    i2 = int(0)
+                    i3 = int(0)
+                    g0 = zero
+                    g1 = zero
+                    g2 = zero
+                    g3 = zero
+                    h0 = False
+                    h1 = False
+                    h2 = False
+                    h3 = False
+                    if t < end:
+                        i0 = tets[t, 0]
+                        i1 = tets[t, 1]
+                        i2 = tets[t, 2]
+                        i3 = tets[t, 3]
+                        g0, g1, g2 = tet_forces(xs[i0], xs[i1], xs[i2], xs[i3], vs[i0], vs[i1], vs[i2],
+                                                vs[i3], dm_inv[t], mu, lam, alpha, beta)
+                        g3 = -(g0 + g1 + g2)
+                        h0 = need[i0] != 0
+                        h1 = need[i1] != 0
+                        h2 = need[i2] != 0
+                        h3 = need[i3] != 0
+                    wp.tile_scatter_add(fs, i0, g0, h0, atomic=False)
+                    wp.tile_scatter_add(fs, i1, g1, h1, atomic=False)
+                    wp.tile_scatter_add(fs, i2, g2, h2, atomic=False)
+                    wp.tile_scatter_add(fs, i3, g3, h3, atomic=False)
+            # node pass: integrate_contact_nodes' arithmetic, one node per lane; clears f
+            for base in range(0, n_nodes, nb):
+                node = base + lane
+                has = node < n_nodes
+                vel = zero
+                xn = zero
+                if has:
+                    w = dt * inv_mass[node]
+                    vel = vs[node] + w * fs[node]
+                    xi = xs[node]
+                    if on_surface[node] != 0:
+                        fc, touched = surface_contact_force(xi, vel, env, node, p, 1)
+                        if s == substeps - 1:
+                            f_c[off + node] = fc
+                        if touched != 0:
+                            contact_flag[env] = 1
+                        vel = vel + w * fc
+                    if fixed[node] != 0:
+                        vel = v_ctl[off + node]
+                    xn = xi + dt * vel
+                wp.tile_scatter_masked(vs, node, vel, has)
+                wp.tile_scatter_masked(xs, node, xn, has)
+                wp.tile_scatter_masked(fs, node, zero, has)
+        wp.tile_store(x, xs, offset=off)
+        wp.tile_store(v, vs, offset=off)
+
+    return frame_resident
+
+
+class ResidentLayout:
+    """Device arrays of the resident kernel for one mesh: coloured moving tets, Dm^-1, node masks."""
+
+    def __init__(self, tets: np.ndarray, dm_inv: np.ndarray, needs_force: np.ndarray, device,
+                 colored: bool = True):
+        # colored=False: one "colour" in mesh order, the streamed path's sum order; valid with one
+        # lane per block only (the CPU default), where it reproduces the streamed kernels bit for bit
+        order, start = color_tets(tets, needs_force) if colored else (np.arange(len(tets)), [0, len(tets)])
+        start = np.asarray(start, np.int32)
+        self.n_colors = len(start) - 1
+        self.n_tets = len(order)
+        self.tets = wp.array(tets[order].astype(np.int32), dtype=wp.int32, device=device)
+        self.dm_inv = wp.array(dm_inv[order], dtype=wp.mat33, device=device)
+        self.color_start = wp.array(start, dtype=wp.int32, device=device)
+        self.need = wp.array(needs_force.astype(np.int32), dtype=wp.int32, device=device)
+        self.kernel = resident_kernel(len(needs_force))
+
+
+def launch_resident(sim, block_dim: int) -> None:
+    """All substeps of one frame of `sim` (a BatchedTwin) in one launch: one block per env."""
+    lay, d = sim.resident, sim.cfg.damping
+    wp.launch_tiled(lay.kernel, dim=[sim.n_envs], block_dim=block_dim, device=sim.device,
+                    inputs=[lay.tets, lay.dm_inv, lay.color_start, lay.n_colors, lay.need, sim.inv_mass,
+                            sim.fixed, sim.on_surface, sim.env_mu, sim.env_lam, d.alpha, d.beta, sim.dt,
+                            sim.substeps, sim.contact, sim.v_ctl],
+                    outputs=[sim.x, sim.v, sim.f_c, sim.contact_flag])
