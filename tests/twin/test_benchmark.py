@@ -27,3 +27,13 @@ def test_fewer_frames_are_named_extrapolated(mesh, tmp_path, monkeypatch):
     assert {"wall_s_extrapolated", "trajectories_per_hour_extrapolated"} <= rec.keys()
     assert "wall_s_measured" not in rec and "trajectories_per_hour" not in rec and "wall_s" not in rec
     assert CORE <= rec.keys()
+
+
+def test_resident_kernel_entry(mesh, tmp_path, monkeypatch):
+    monkeypatch.setattr(benchmark.SensorMesh, "load", classmethod(lambda cls, path: mesh))
+    out = tmp_path / "twin.json"
+    benchmark.main(["--device", "cpu", "--resolutions", "coarse", "--n-envs", "2", "--max-frames", "3",
+                    "--kernel", "resident", "--block-dim", "256", "--out", str(out)])
+    (rec,) = json.loads(out.read_text())
+    assert rec["kernel"] == "resident" and rec["block_dim"] == 256 and rec["force_sum"] == "colored"
+    assert CORE <= rec.keys() and rec["core_substep_us"] > 0

@@ -4,6 +4,8 @@ GPU atomics add forces in a nondeterministic order, so the devices agree only to
 amplified over a trajectory (the reference replays to ~0.04 px). This script measures the figure.
 
     python -m palpation.twin.agreement --mesh results/twin/mesh_coarse.npz --out results/bench/agreement.json
+    python -m palpation.twin.agreement --mesh results/twin/mesh_reference.npz --devices cuda:0 \
+        --kernels streamed resident --out results/bench/agreement_resident.json   # issue 17
 """
 
 from __future__ import annotations
@@ -31,26 +33,29 @@ def agreement_requests() -> list[EnvRequest]:
     return reqs
 
 
-def compare_devices(mesh: SensorMesh, devices: list[str], max_frames: int | None = None) -> dict:
+def compare_devices(mesh: SensorMesh, devices: list[str], max_frames: int | None = None,
+                    kernels: tuple[str, str] = ("streamed", "streamed")) -> dict:
+    """The agreement batch on devices[0] with kernels[0] vs devices[-1] with kernels[-1]."""
     from palpation.markers.template import rest_template
 
-    cfg = TwinConfig()
     binding = bind_markers(mesh.nodes, mesh.dome_nodes, rest_template())
-    runs = {}
-    for dev in devices:
+    runs = []
+    for dev, kernel in ((devices[0], kernels[0]), (devices[-1], kernels[-1])):
+        cfg = TwinConfig()
+        cfg.integrator.kernel = kernel
         res = run_batch(mesh, cfg, agreement_requests(), binding=binding, device=dev, progress=False,
                         max_frames=max_frames)
         if res.failed:
-            raise RuntimeError(f"{dev}: envs failed: {[f.name for f in res.failed]}")
-        runs[dev] = {r.name: r for r in res.records}
-    ref, other = devices[0], devices[-1]
+            raise RuntimeError(f"{dev} ({kernel}): envs failed: {[f.name for f in res.failed]}")
+        runs.append({r.name: r for r in res.records})
     per = {}
-    for name, rec in runs[ref].items():
-        diff = np.linalg.norm(rec.markers.astype(np.float64) - runs[other][name].markers, axis=-1)
-        contact_same = float(np.mean(rec.contact == runs[other][name].contact))
+    for name, rec in runs[0].items():
+        diff = np.linalg.norm(rec.markers.astype(np.float64) - runs[1][name].markers, axis=-1)
+        contact_same = float(np.mean(rec.contact == runs[1][name].contact))
         per[name] = {"max_px": float(diff.max()), "mean_px": float(diff.mean()),
                      "final_mean_px": float(diff[-1].mean()), "contact_agreement": contact_same}
-    return {"devices": devices, "resolution": mesh.resolution, "commit": git_commit(),
+    return {"devices": devices, "kernels": list(kernels), "resolution": mesh.resolution, "commit": git_commit(),
+            "frames": {name: len(rec.markers) for name, rec in runs[0].items()},
             "max_px": max(v["max_px"] for v in per.values()), "per_trajectory": per}
 
 
@@ -61,13 +66,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--mesh", required=True, help="cached mesh npz (rule `mesh`)")
     parser.add_argument("--devices", nargs="+", default=["cpu", "cuda:0"],
                         help="first is the reference (default: cpu cuda:0)")
+    parser.add_argument("--kernels", nargs="+", default=["streamed"], choices=["streamed", "resident"],
+                        help="twin.integrator.kernel of the first and the last run (default: streamed both)")
     parser.add_argument("--max-frames", type=int, default=None, help="cut trajectories short")
     parser.add_argument("--out", required=True, help="JSON output")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO)
-    result = compare_devices(SensorMesh.load(args.mesh), args.devices, args.max_frames)
+    kernels = (args.kernels[0], args.kernels[-1])
+    result = compare_devices(SensorMesh.load(args.mesh), args.devices, args.max_frames, kernels)
     save_json(args.out, result)
-    print(f"max marker difference {args.devices[0]} vs {args.devices[-1]}: {result['max_px']:.4g} px")
+    print(f"max marker difference {args.devices[0]} {kernels[0]} vs {args.devices[-1]} {kernels[1]}: "
+          f"{result['max_px']:.4g} px")
     return 0
 
 

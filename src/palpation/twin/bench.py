@@ -42,6 +42,22 @@ def substep_bytes(n_nodes: int, n_tets: int, n_surface: int, n_envs: int,
     return {"streamed": int(streamed), "compulsory": int(compulsory)}
 
 
+def resident_substep_bytes(n_nodes: int, n_tets: int, n_surface: int, n_fixed: int, n_envs: int,
+                           substeps: int) -> dict[str, int]:
+    """Global-memory bytes per substep of the frame-resident kernel (twin/resident.py).
+
+    Per env and substep a block reads the mesh constants (tet indices, Dm^-1, 1/m and the node
+    masks: the same for every env, so L2 hits) and v_control of its driven nodes; once per frame it
+    loads and stores x, v and writes f_c of the surface nodes. "streamed" counts every access,
+    "compulsory" each array once per frame (mesh constants once per batch), both per substep.
+    """
+    mesh_const = n_tets * (4 * I32 + MAT33) + n_nodes * (F32 + 3 * I32)
+    per_frame = n_nodes * 4 * VEC3 + n_surface * VEC3  # x, v in and out; f_c
+    streamed = n_envs * (mesh_const + n_fixed * VEC3 + per_frame / substeps)
+    compulsory = mesh_const / substeps + n_envs * (per_frame + n_nodes * VEC3) / substeps  # + v_control
+    return {"streamed": int(streamed), "compulsory": int(compulsory)}
+
+
 def measure_host_bandwidth(n_bytes: int = 1 << 27) -> float:
     """Copy bandwidth of this host (bytes/s read + written) from a numpy copy."""
     a, b = np.ones(n_bytes // 8), np.empty(n_bytes // 8)
@@ -83,10 +99,14 @@ def time_substeps(mesh: SensorMesh, n_envs: int, n_substeps: int = 124, device: 
         wp.synchronize_device(sim.device)
         best = min(best, time.perf_counter() - t)
     per_substep = best / n_substeps
-    nbytes = substep_bytes(mesh.n_nodes, sim.n_force_tets, len(mesh.surface_nodes), n_envs, sim.gather)
+    if sim.resident is not None:
+        nbytes = resident_substep_bytes(mesh.n_nodes, sim.n_force_tets, len(mesh.surface_nodes),
+                                        int(mesh.fixed.sum()), n_envs, n_substeps)
+    else:
+        nbytes = substep_bytes(mesh.n_nodes, sim.n_force_tets, len(mesh.surface_nodes), n_envs, sim.gather)
     bw = device_bandwidth(sim.device)
     return {"device": str(sim.device), "device_name": sim.device.name, "resolution": mesh.resolution,
-            "n_envs": n_envs, "n_substeps": n_substeps, "force_sum": "gather" if sim.gather else "scatter",
+            "n_envs": n_envs, "n_substeps": n_substeps, "force_sum": "colored" if sim.resident is not None else "gather" if sim.gather else "scatter",
             "substeps_per_s": 1.0 / per_substep,
             "env_substeps_per_s": n_envs / per_substep, "substep_s": per_substep,
             "bytes_streamed": nbytes["streamed"], "bytes_compulsory": nbytes["compulsory"],

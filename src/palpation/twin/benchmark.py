@@ -10,6 +10,8 @@ and then the record says so in its field names: `wall_s_extrapolated`, `extrapol
 
     python -m palpation.twin.benchmark --device cuda:0 --out results/bench/twin.json
     python -m palpation.twin.benchmark --device cpu --budget-s 20 --out results/bench/twin.json
+    python -m palpation.twin.benchmark --device cuda:0 --kernel resident --resolutions reference \
+        --n-envs 500 --out results/bench/twin_resident.json     # the frame-resident kernel (issue 17)
 """
 
 from __future__ import annotations
@@ -74,7 +76,10 @@ def bench_point(mesh: SensorMesh, cfg: TwinConfig, n_envs: int, device: str, max
     rec = {"device": device_name(device), "resolution": mesh.resolution, "n_envs": n_envs,
            "frames": SLIDE_FRAMES, "frames_timed": k, "substeps_per_frame": substeps,
            "substeps_per_s": substeps / per_frame, "env_substeps_per_s": n_envs * substeps / per_frame,
-           "setup_s": setup, "nodes": mesh.n_nodes, "tets": mesh.n_tets, "commit": git_commit()}
+           "setup_s": setup, "nodes": mesh.n_nodes, "tets": mesh.n_tets, "commit": git_commit(),
+           "kernel": cfg.integrator.kernel}
+    if cfg.integrator.kernel == "resident":
+        rec["block_dim"] = cfg.integrator.block_dim
     if k == SLIDE_FRAMES:  # the whole batch was timed: no estimate in the record
         rec.update(wall_s_measured=tk, trajectories_per_hour=n_envs * 3600.0 / tk)
     else:
@@ -114,6 +119,10 @@ def main(argv: list[str] | None = None) -> list[dict]:
                         help="frames timed per point at most (default: a full slide; fewer -> extrapolated)")
     parser.add_argument("--budget-s", type=float, default=None,
                         help="time fewer frames so each point takes about this long (extrapolated; slow CPUs)")
+    parser.add_argument("--kernel", choices=["streamed", "resident"], default="streamed",
+                        help="twin.integrator.kernel: the streamed substep kernels or the frame-resident one")
+    parser.add_argument("--block-dim", type=int, nargs="+", default=[TwinConfig().integrator.block_dim],
+                        help="threads per env block of the resident kernel (one record each)")
     parser.add_argument("--out", type=Path, default=Path("results/bench/twin.json"))
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s %(name)s %(message)s")
@@ -121,9 +130,12 @@ def main(argv: list[str] | None = None) -> list[dict]:
     for res in args.resolutions:
         mesh = SensorMesh.load(args.mesh_dir / f"mesh_{res}.npz")
         for n in args.n_envs:
-            records.append(bench_point(mesh, TwinConfig(device=args.device), n, args.device,
-                                       args.max_frames, args.budget_s))
-            save_json(args.out, records)  # rewritten after each point: a long run keeps what it has
+            for block_dim in (args.block_dim if args.kernel == "resident" else [None]):
+                cfg = TwinConfig(device=args.device)
+                cfg.integrator.kernel = args.kernel
+                cfg.integrator.block_dim = block_dim or cfg.integrator.block_dim
+                records.append(bench_point(mesh, cfg, n, args.device, args.max_frames, args.budget_s))
+                save_json(args.out, records)  # rewritten after each point: a long run keeps what it has
     print(json.dumps(records, indent=1))
     return records
 

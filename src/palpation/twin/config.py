@@ -72,7 +72,7 @@ class IntegratorConfig:
     # the CPU path); "resident": one launch per frame, each env's x, v, f in one block's shared
     # memory (twin/resident.py, issue 17; SDF contact and the plain elastic kernel only)
     kernel: str = "streamed"
-    block_dim: int = 256  # threads per env block of the resident kernel
+    block_dim: int = 512  # threads per env block of the resident kernel (<= 512: 106 registers a thread)
 
 
 @dataclass
@@ -218,8 +218,8 @@ class TwinConfig:
         if self.integrator.kernel == "resident" and (self.contact.rule != "sdf" or self.layered):
             raise ValueError("twin.integrator.kernel='resident' needs contact.rule='sdf' and the plain elastic "
                              "kernel (material.shell_thickness=0, damping.per_env=false); use 'streamed'")
-        if not 1 <= self.integrator.block_dim <= 1024:
-            raise ValueError(f"twin.integrator.block_dim={self.integrator.block_dim}: use 1..1024 threads")
+        if not 1 <= self.integrator.block_dim <= 512:  # 106 registers a thread on sm_90: 512 fit an SM
+            raise ValueError(f"twin.integrator.block_dim={self.integrator.block_dim}: use 1..512 threads")
         if self.material.shell_thickness < 0 or self.material.shell_ratio <= 0:
             raise ValueError(f"twin.material: need shell_thickness >= 0 and shell_ratio > 0, got "
                              f"{self.material.shell_thickness}, {self.material.shell_ratio}")
