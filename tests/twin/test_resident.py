@@ -7,7 +7,6 @@ import warp as wp
 from palpation.twin.config import TwinConfig
 from palpation.twin.resident import ResidentLayout, color_tets
 from palpation.twin.simulator import BatchedTwin
-from palpation.twin.elasticity import rest_shape
 
 
 def _press(mesh, kernel, frames=6, layout=None, block_dim=1):
@@ -45,10 +44,7 @@ def test_coloring_separates_force_nodes(mesh):
 
 def test_mesh_order_resident_equals_streamed_bit_for_bit(mesh):
     def mesh_order(sim):
-        moving = np.flatnonzero(sim.resident.need.numpy()[mesh.tets].any(axis=1))
-        t = mesh.tets[moving]
-        return ResidentLayout(t, rest_shape(mesh.nodes, t)[0], sim.resident.need.numpy() != 0, sim.device,
-                              colored=False)
+        return ResidentLayout.for_mesh(mesh, sim.resident.need.numpy() != 0, sim.device, colored=False)
 
     ref, sim_ref = _press(mesh, "streamed")
     got, sim = _press(mesh, "resident", layout=mesh_order)

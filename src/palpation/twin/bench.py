@@ -105,8 +105,9 @@ def time_substeps(mesh: SensorMesh, n_envs: int, n_substeps: int = 124, device: 
     else:
         nbytes = substep_bytes(mesh.n_nodes, sim.n_force_tets, len(mesh.surface_nodes), n_envs, sim.gather)
     bw = device_bandwidth(sim.device)
+    force_sum = "colored" if sim.resident is not None else "gather" if sim.gather else "scatter"
     return {"device": str(sim.device), "device_name": sim.device.name, "resolution": mesh.resolution,
-            "n_envs": n_envs, "n_substeps": n_substeps, "force_sum": "colored" if sim.resident is not None else "gather" if sim.gather else "scatter",
+            "n_envs": n_envs, "n_substeps": n_substeps, "force_sum": force_sum,
             "substeps_per_s": 1.0 / per_substep,
             "env_substeps_per_s": n_envs / per_substep, "substep_s": per_substep,
             "bytes_streamed": nbytes["streamed"], "bytes_compulsory": nbytes["compulsory"],

@@ -20,7 +20,7 @@ import numpy as np
 import warp as wp
 
 from palpation.twin.contact import ContactParams, surface_contact_force
-from palpation.twin.elasticity import tet_forces
+from palpation.twin.elasticity import rest_shape, tet_forces
 
 VEC3 = 12
 
@@ -168,6 +168,12 @@ class ResidentLayout:
         self.color_start = wp.array(start, dtype=wp.int32, device=device)
         self.need = wp.array(needs_force.astype(np.int32), dtype=wp.int32, device=device)
         self.kernel = resident_kernel(len(needs_force))
+
+    @classmethod
+    def for_mesh(cls, mesh, needs_force: np.ndarray, device, colored: bool = True) -> "ResidentLayout":
+        """The layout of the tets with a node that needs its force (the streamed kernels' moving tets)."""
+        tets = mesh.tets[needs_force[mesh.tets].any(axis=1)]
+        return cls(tets, rest_shape(mesh.nodes, tets)[0], needs_force, device, colored)
 
 
 def launch_resident(sim, block_dim: int) -> None:

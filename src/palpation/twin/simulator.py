@@ -29,7 +29,6 @@ from palpation.twin.parameters import CONTACT_KEYS, ENV_KEYS, LAYERED_KEYS, by_e
 log = logging.getLogger(__name__)
 
 
-
 def resolve_device(name: str):
     """`cuda` when present, else the CPU (the configs say cuda for the paper profile)."""
     init_warp()
@@ -70,11 +69,8 @@ class BatchedTwin:
             run_index[perm] = np.arange(len(perm))
         slots, start = force_slots(mesh.tets[moving_ix], needs_force, N, run_index)  # sums in mesh order
         moving_ix = moving_ix[np.argsort(run_index)]
-        self.resident = None  # the frame-resident kernel's layout (cfg.integrator.kernel, issue 17)
-        if cfg.integrator.kernel == "resident":
-            mesh_order = np.flatnonzero(moving)
-            self.resident = ResidentLayout(mesh.tets[mesh_order], rest_shape(mesh.nodes, mesh.tets[mesh_order])[0],
-                                           needs_force, dev)
+        # the frame-resident kernel's layout (cfg.integrator.kernel, issue 17)
+        self.resident = ResidentLayout.for_mesh(mesh, needs_force, dev) if cfg.integrator.kernel == "resident" else None
         self.tet_order = np.concatenate([moving_ix, np.flatnonzero(~moving)])
         self.n_force_tets = len(moving_ix)
         tets = mesh.tets[self.tet_order]
