@@ -31,10 +31,12 @@ def _press(mesh, kernel, frames=6, layout=None, block_dim=1):
     return np.array(out), sim
 
 
-def test_coloring_separates_force_nodes(mesh):
+@pytest.mark.parametrize("cap", [None, 64])
+def test_coloring_separates_force_nodes(mesh, cap):
     need = ~mesh.fixed | np.isin(np.arange(mesh.n_nodes), mesh.surface_nodes)
-    order, start = color_tets(mesh.tets, need)
+    order, start = color_tets(mesh.tets, need, cap)
     assert sorted(order) == list(range(mesh.n_tets)) and start[-1] == mesh.n_tets
+    assert cap is None or np.diff(start).max() <= cap
     for c in range(len(start) - 1):
         nodes = mesh.tets[order[start[c]:start[c + 1]]].reshape(-1)
         nodes = nodes[need[nodes]]

@@ -25,21 +25,28 @@ from palpation.twin.elasticity import rest_shape, tet_forces
 VEC3 = 12
 
 
-def color_tets(tets: np.ndarray, needs_force: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def color_tets(tets: np.ndarray, needs_force: np.ndarray, cap: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Greedy colouring in mesh order: no two tets of a colour share a node that needs its force.
 
+    A colour holds at most `cap` tets (one block's lanes): the first colours fill whole chunks
+    instead of the plain greedy's 560, 547, ... 16, so fewer chunks (barriers) run per substep.
     Returns (order, start): tets[order] lists colour 0 first, each colour in mesh order, and colour
     k is order[start[k]:start[k+1]]. Driven interior nodes are ignored: their force is discarded.
     """
     tets = np.asarray(tets)
+    cap = cap or len(tets)
     used: list[set[int]] = [set() for _ in range(len(needs_force))]  # colours seen at each node
     color = np.empty(len(tets), np.int64)
+    size: list[int] = []
     for t, corners in enumerate(tets):
         nodes = [int(i) for i in corners if needs_force[i]]
         taken = set().union(*(used[i] for i in nodes)) if nodes else set()
         c = 0
-        while c in taken:
+        while c in taken or (c < len(size) and size[c] >= cap):
             c += 1
+        if c == len(size):
+            size.append(0)
+        size[c] += 1
         color[t] = c
         for i in nodes:
             used[i].add(c)
@@ -156,10 +163,10 @@ class ResidentLayout:
     """Device arrays of the resident kernel for one mesh: coloured moving tets, Dm^-1, node masks."""
 
     def __init__(self, tets: np.ndarray, dm_inv: np.ndarray, needs_force: np.ndarray, device,
-                 colored: bool = True):
+                 colored: bool = True, cap: int | None = None):
         # colored=False: one "colour" in mesh order, the streamed path's sum order; valid with one
         # lane per block only (the CPU default), where it reproduces the streamed kernels bit for bit
-        order, start = color_tets(tets, needs_force) if colored else (np.arange(len(tets)), [0, len(tets)])
+        order, start = color_tets(tets, needs_force, cap) if colored else (np.arange(len(tets)), [0, len(tets)])
         start = np.asarray(start, np.int32)
         self.n_colors = len(start) - 1
         self.n_tets = len(order)
@@ -170,10 +177,12 @@ class ResidentLayout:
         self.kernel = resident_kernel(len(needs_force))
 
     @classmethod
-    def for_mesh(cls, mesh, needs_force: np.ndarray, device, colored: bool = True) -> "ResidentLayout":
-        """The layout of the tets with a node that needs its force (the streamed kernels' moving tets)."""
+    def for_mesh(cls, mesh, needs_force: np.ndarray, device, colored: bool = True,
+                 cap: int | None = None) -> "ResidentLayout":
+        """The layout of the tets with a node that needs its force (the streamed kernels' moving tets);
+        `cap` = the block size: colours of at most one chunk each."""
         tets = mesh.tets[needs_force[mesh.tets].any(axis=1)]
-        return cls(tets, rest_shape(mesh.nodes, tets)[0], needs_force, device, colored)
+        return cls(tets, rest_shape(mesh.nodes, tets)[0], needs_force, device, colored, cap)
 
 
 def launch_resident(sim, block_dim: int) -> None:
