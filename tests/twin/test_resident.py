@@ -9,12 +9,15 @@ from palpation.twin.resident import ResidentLayout, color_tets
 from palpation.twin.simulator import BatchedTwin
 
 
-def _press(mesh, kernel, frames=6, layout=None, block_dim=1):
+DEVICES = ["cpu"] + (["cuda:0"] if wp.is_cuda_available() else [])
+
+
+def _press(mesh, kernel, frames=6, layout=None, block_dim=1, device="cpu"):
     """Two envs pressing 2 mm into the vessel (one without it): positions after each frame."""
     cfg = TwinConfig()
     cfg.integrator.kernel, cfg.integrator.block_dim = kernel, block_dim
-    cfg.integrator.force_sum = "scatter"  # mesh-order sums on the CPU
-    sim = BatchedTwin(mesh, 2, cfg, {"vessel": np.array([1.0, 0.0])}, device="cpu")
+    cfg.integrator.force_sum = "scatter" if device == "cpu" else "gather"  # mesh-order sums
+    sim = BatchedTwin(mesh, 2, cfg, {"vessel": np.array([1.0, 0.0])}, device=device)
     if layout is not None:
         sim.resident = layout(sim)
     top = cfg.scene.phantom_top_z
@@ -56,13 +59,13 @@ def test_mesh_order_resident_equals_streamed_bit_for_bit(mesh):
     np.testing.assert_array_equal(sim.velocities_world(), sim_ref.velocities_world())
 
 
-@pytest.mark.parametrize("block_dim", [1, 16])
-def test_colored_resident_agrees_with_streamed(mesh, block_dim):
-    """Colour order changes the float32 sums only; 16 cooperative lanes exercise the barriers."""
-    wp.config.enable_cpu_blocks = block_dim > 1
+@pytest.mark.parametrize("device,block_dim", [("cpu", 1), ("cpu", 16)] + [(d, 256) for d in DEVICES[1:]])
+def test_colored_resident_agrees_with_streamed(mesh, device, block_dim):
+    """Colour order changes the float32 sums only; 16 cooperative CPU lanes exercise the barriers."""
+    wp.config.enable_cpu_blocks = device == "cpu" and block_dim > 1
     try:
-        ref, _ = _press(mesh, "streamed")
-        got, sim = _press(mesh, "resident", block_dim=block_dim)
+        ref, _ = _press(mesh, "streamed", device=device)
+        got, sim = _press(mesh, "resident", block_dim=block_dim, device=device)
     finally:
         wp.config.enable_cpu_blocks = False
     moved = np.abs(ref[-1] - ref[0]).max()
