@@ -139,6 +139,7 @@ class TrainAppConfig:
     config_name: str = MISSING
     seed: int = MISSING
     seeds: Optional[List[int]] = MISSING  # null: train `seed` alone
+    also_test: List[str] = MISSING  # with seeds: "<config name>:<test set>" scored by the same models
     clip_len: int = MISSING
     device: str = MISSING
     train_on: str = MISSING
