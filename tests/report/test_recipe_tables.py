@@ -70,3 +70,13 @@ def test_recipe_report_run_in_mlflow(tmp_path, results_tmp):
     assert "A-to-B/robust/none/d_bar_mm" not in run.data.metrics  # NaN is not logged
     stored = {p.name for p in (results_tmp / "mlartifacts" / "recipe_report").rglob("*.*")}
     assert {"recipe_ablation.csv", "reliability.png", "uncertainty_maps.pdf"} <= stored
+
+
+def test_switch_rows_only_for_the_listed_configurations():
+    from palpation.apps.recipe_report import row_groups
+
+    c = {"experiments": ["A-to-B", "C-to-B"], "recipes": ["reference", "robust"], "switches": ["jitter", "scale"]}
+    full = [("reference", "none"), ("robust", "none")]
+    assert row_groups(c, "C-to-B") == full + [("robust", "jitter"), ("robust", "scale")]  # missing key: all
+    c["switch_experiments"] = ["A-to-B"]  # the paper profile's cut
+    assert row_groups(c, "C-to-B") == full and row_groups(c, "A-to-B")[2:] == [("robust", "jitter"), ("robust", "scale")]

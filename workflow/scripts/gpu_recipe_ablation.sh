@@ -9,6 +9,9 @@
 #   device's per-command limit. OUTDIR gets recipe_runs.tgz (every finished run's metrics.json, scores.npz,
 #   pr.npz, no checkpoints), the report when made, and the logs. A stopped run resumes: the same command again
 #   on the warm machine keeps the finished jobs and redoes the cut ones (the profile's rerun-incomplete).
+# Needs what workflow/scripts/device_paper.sh needs: the lock's packages importable (PYTHONPATH to a --target
+# install, workflow/scripts/gpu_loop_wheels.sh) and the CPU-made inputs carried in (the meshes under results/twin,
+# the photo set results/data/photos: the device has no gmsh).
 # On the lent device (10 min per command; $OUT is emptied before each):
 #   LIMIT_S=560 PART="reference_none robust_none" bash workflow/scripts/gpu_recipe_ablation.sh results/recipe_gpu
 #   cp -r results/recipe_gpu/. $OUT/
