@@ -139,9 +139,12 @@ def test_paper_recipe_ablation_plan(tmp_path):
     listing = dry_run(tmp_path, "-p", "--workflow-profile", str(REPO_ROOT / "workflow/profiles/paper"),
                       "results/recipe/report/recipe_ablation.csv")
     stats = job_stats(listing)
-    assert stats["train_recipe_seeds_sim_large"] == 10  # reference, robust, robust minus each of 8 switches
+    assert stats["train_recipe_seeds_sim_large"] == 8  # reference, robust minus each of 7 switches
+    # robust, whose job also writes robust minus `calibration` (the same models' raw scores)
+    assert stats["train_recipe_robust_sim_large"] == 1
     assert stats["train_recipe_seeds_meat_compact"] == 2  # C-to-B: the full recipes
     assert "train_recipe" not in stats
-    sim = [ln for ln in listing.splitlines() if "SNAKEMAKE_RULE=train_recipe_seeds_sim_large" in ln
+    sim = [ln for ln in listing.splitlines() if "SNAKEMAKE_RULE=train_recipe_" in ln and "_sim_large" in ln
            and "palpation.apps.train" in ln]
-    assert len(sim) == 10 and all("'seeds=[0,1,2,3,4]'" in ln and "'also_test=[A-to-C:meat]'" in ln for ln in sim)
+    assert len(sim) == 9 and all("'seeds=[0,1,2,3,4]'" in ln and "'also_test=[A-to-C:meat]'" in ln for ln in sim)
+    assert sum("also_uncalibrated=results/recipe/robust/calibration " in ln for ln in sim) == 1

@@ -4,12 +4,14 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 
 from palpation.apps.train import job_from_config, run
+from palpation.metrics.calibration import Calibrator
 from palpation.paths import REPO_ROOT
 
 CONF = str(REPO_ROOT / "conf")
@@ -141,9 +143,19 @@ def test_robust_seeds_together_and_shared_test_sets_match_separate_runs(train_se
     Meat (A-to-C) match each (configuration, seed) trained alone up to the batched matmuls' rounding."""
     paths = [f"data.{k}={v}" for k, v in train_sets.items()]
     root = tmp_path / "together" / "A-to-B" / "L2"
+    raw_root = tmp_path / "uncalibrated"
     together = run(compose_train(["experiment=A-to-B", "seeds=[0,1]", "also_test=[A-to-C:meat]", *ROBUST_TINY,
-                                  *paths]), root)
+                                  f"also_uncalibrated={raw_root}", *paths]), root)
+    together, raw = together[:4], together[4:]
     assert [(m["config"], m["seed"]) for m in together] == [("A-to-B", 0), ("A-to-B", 1), ("A-to-C", 0), ("A-to-C", 1)]
+    for t, r in zip(together, raw):  # robust minus calibration: the same models, their raw scores
+        sub = Path(t["config"], "L2", f"seed{t['seed']}")
+        d, rd = root.parents[1] / sub, raw_root / sub
+        assert (d / "checkpoint.pt").read_bytes() == (rd / "checkpoint.pt").read_bytes()
+        assert "calibration" not in r and r["test"] == t["test_raw"] and r["history"] == t["history"]
+        cal = Calibrator(**t["calibration"])
+        probs, raw_probs = (np.load(f / "scores.npz")["probs"] for f in (d, rd))
+        assert np.allclose(probs, cal.apply(raw_probs), atol=1e-6)
     assert together[0]["trained_together"]["configs"] == ["A-to-B", "A-to-C"]
     assert json.loads((tmp_path / "together/A-to-C/L2/seed1/metrics.json").read_text())["test_on"] == "meat"
     early, diffs = False, []
@@ -153,8 +165,9 @@ def test_robust_seeds_together_and_shared_test_sets_match_separate_runs(train_se
         assert t["best_epoch"] == alone["best_epoch"] and len(t["history"]) == len(alone["history"])
         early |= len(alone["history"]) < 3
         assert t["alpha"] == alone["alpha"]  # the same whole-split statistics
-        scores = [np.load(d / "scores.npz")["probs"] for d in (root.parents[1] / t["config"] / "L2" / f"seed{t['seed']}",
-                                                                tmp_path / "alone" / t["config"] / str(t["seed"]))]
+        pair = (root.parents[1] / t["config"] / "L2" / f"seed{t['seed']}",
+                tmp_path / "alone" / t["config"] / str(t["seed"]))
+        scores = [np.load(d / "scores.npz")["probs"] for d in pair]
         diffs.append(np.abs(scores[0] - scores[1]).max())
         for key in ("auroc", "ap", "fg_iou", "bg_iou"):  # calibrated test metrics: a tie may flip on a tiny set
             assert t["test"][key] == pytest.approx(alone["test"][key], abs=2e-3), (t["config"], t["seed"], key)
@@ -170,5 +183,7 @@ def test_robust_seeds_together_and_shared_test_sets_match_separate_runs(train_se
 def test_also_test_needs_seeds_and_the_run_layout(train_sets, tmp_path):
     with pytest.raises(ValueError, match="pass seeds="):
         run(compose_train(["experiment=A-to-B", "also_test=[A-to-C:meat]", "tracking=false"]), tmp_path)
+    with pytest.raises(ValueError, match="calibrates nothing"):
+        run(compose_train(["experiment=A-to-B", "seeds=[0]", "also_uncalibrated=x", "tracking=false"]), tmp_path)
     with pytest.raises(ValueError, match="needs the run dir <root>/A-to-B/L5"):
         run(compose_train(["experiment=A-to-B", "seeds=[0]", "also_test=[A-to-C:meat]", "tracking=false"]), tmp_path)

@@ -15,7 +15,7 @@ from snakemake_interface_executor_plugins.settings import DeploymentMethod
 
 from palpation.confdeps import conf_files
 from palpation.experiments import dataset_files, experiments
-from palpation.report.runs import run_dir
+from palpation.report.runs import recipe_root, run_dir
 
 
 def config_error(message, profile_file):
@@ -185,6 +185,21 @@ def recipe_groups():
     for exp in RECIPE_ABL["experiments"]:
         groups.setdefault(f"{EXPERIMENTS[exp].train_on}_{EXPERIMENTS[exp].model}", []).append(exp)
     return groups
+
+
+def recipe_seed_outputs(exps, recipe, *switches):
+    """Outputs of a seeds-together ablation job: every seed of every configuration of `exps`, per switch_off folder."""
+    return {key: [str(run_dir(recipe_root(RECIPE_DIR, recipe, switch), exp, "{clip_len}", seed) / name)
+                  for switch in switches for exp in exps for seed in RECIPE_ABL["seeds"]]
+            for key, name in (("metrics", "metrics.json"), ("scores", "scores.npz"), ("pr", "pr.npz"),
+                              ("checkpoint", "checkpoint.pt"))}
+
+
+def recipe_shares_calibration(exps):
+    """Whether the ablation has robust minus `calibration` rows for these configurations (one training group):
+    the robust job then writes them from its own models (rule train_recipe_robust_<group>)."""
+    return "calibration" in RECIPE_ABL["switches"] and all(
+        ("robust", "calibration") in recipe_switch_groups(exp) for exp in exps)
 
 
 def recipe_switch_groups(exp):

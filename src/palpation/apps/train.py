@@ -5,6 +5,7 @@
     python -m palpation.apps.train experiment=A-to-B 'seeds=[0,1,2,3,4]' device=cuda   # one process
     python -m palpation.apps.train experiment=A-to-B 'seeds=[0,1]' 'also_test=[A-to-C:meat]' \
         hydra.run.dir=results/adhoc/train/A-to-B/L5        # one training, scored on Silicone and Meat
+    ... recipe=robust also_uncalibrated=results/adhoc/uncalibrated   # and its raw scores written there too
 Outputs land in Hydra's run dir (metrics.json, scores.npz, pr.npz, checkpoint.pt) and in MLflow; with
 `seeds`, seed s writes them to <run dir>/seed<s>/ (one MLflow run per seed all the same).
 """
@@ -79,12 +80,21 @@ def run(cfg: DictConfig, out_dir: str | Path | None = None) -> dict | list[dict]
             raise ValueError(f"seeds={seeds}: list distinct seeds, at least one (or seeds=null to train `seed` alone)")
         tests = [(job.config_name, job.test_on, Path(out_dir))] + also_tested(cfg, job, out_dir)
         jobs = [replace(job, seed=s, config_name=name, test_on=test_on) for name, test_on, _ in tests for s in seeds]
-        return run_jobs_together(jobs, [d / f"seed{s}" for *_, d in tests for s in seeds],
-                                 params=[{**params, "seed": s, "config_name": name, "test_on": test_on}
-                                         for name, test_on, _ in tests for s in seeds],
-                                 track=bool(cfg.tracking), tags=tags, progress=bool(cfg.progress))
-    if cfg.also_test:
-        raise ValueError("also_test scores the models of `seeds` trained together: pass seeds=[...] with it")
+        dirs = [d / f"seed{s}" for *_, d in tests for s in seeds]
+        per_job = [{**params, "seed": s, "config_name": name, "test_on": test_on} for name, test_on, _ in tests
+                   for s in seeds]
+        if cfg.also_uncalibrated:  # the same models' raw scores: the ablation's robust minus `calibration`
+            if job.train.calibration == "none":
+                raise ValueError(f"also_uncalibrated={cfg.also_uncalibrated}: recipe {cfg.recipe.name} calibrates "
+                                 "nothing; drop also_uncalibrated")
+            root = Path(cfg.also_uncalibrated)
+            dirs += [root / j.config_name / f"L{j.clip_len}" / f"seed{j.seed}" for j in jobs]
+            per_job += [{**p, "recipe": {**p["recipe"], "calibration": "none"}} for p in per_job]
+            jobs += [replace(j, train=replace(j.train, calibration="none")) for j in jobs]
+        return run_jobs_together(jobs, dirs, params=per_job, track=bool(cfg.tracking), tags=tags,
+                                 progress=bool(cfg.progress))
+    if cfg.also_test or cfg.also_uncalibrated:
+        raise ValueError("also_test and also_uncalibrated use the models of `seeds` trained together: pass seeds=[...]")
     return run_job(job, out_dir, params=params, track=bool(cfg.tracking), tags=tags,
                    progress=bool(cfg.progress))
 

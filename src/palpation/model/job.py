@@ -86,8 +86,10 @@ def load_test_set(job: TrainJob, rest: np.ndarray) -> ClipSet:
 
 
 def training_key(job: TrainJob) -> TrainJob:
-    """What fixes a job's training: everything but its seed and the test set it is scored on."""
-    return replace(job, seed=0, config_name="", test_on=job.train_on, data={job.train_on: job.data[job.train_on]})
+    """What fixes a job's training: everything but its seed, the test set it is scored on and the post-hoc
+    calibration of its scores (fitted after training, on the val split)."""
+    return replace(job, seed=0, config_name="", test_on=job.train_on, data={job.train_on: job.data[job.train_on]},
+                   train=replace(job.train, calibration="none"))
 
 
 def _run_tags(job: TrainJob, tags: dict | None) -> dict:
@@ -114,22 +116,25 @@ def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: 
     """`run_job` for seeds of one configuration (jobs differing only in seed) trained together
     (palpation.model.stacked); one MLflow run and one output folder per job, as separate jobs.
 
-    Jobs may also differ in the test set they are scored on (`config_name`, `test_on`): configurations
-    that train alike (A-to-B and A-to-C both train the large model on Sim) then share one training, each
-    seed's models scored on every test set; every seed must come with every test set.
+    Jobs may also differ in the test set they are scored on (`config_name`, `test_on`) and in the post-hoc
+    calibration of the scores (`train.calibration`): configurations that train alike (A-to-B and A-to-C both
+    train the large model on Sim) then share one training, each seed's models scored on every test set and
+    written once per calibration; every seed must come with every (test set, calibration).
 
     Each test set is scored by all seeds at once (`predict_seeds`). metrics.json gains `trained_together`
     (the seeds and the joint training wall seconds; with several test sets also their `configs`);
     `train_seconds` and `test_seconds` are each job's share of the joint times."""
     first = jobs[0]
     if any(training_key(j) != training_key(first) for j in jobs):
-        raise ValueError("jobs trained together must differ only in their seed and test set "
+        raise ValueError("jobs trained together must differ only in their seed, test set and calibration "
                          f"({first.config_name}, L={first.clip_len}); train other configurations apart")
     seeds = list(dict.fromkeys(j.seed for j in jobs))
     tests = list(dict.fromkeys((j.config_name, j.test_on) for j in jobs))
-    pairs = [(j.config_name, j.test_on, j.seed) for j in jobs]
-    if len(set(pairs)) != len(jobs) or len(jobs) != len(seeds) * len(tests):
-        raise ValueError(f"jobs trained together need every seed {seeds} once with every test set {tests}")
+    outputs = list(dict.fromkeys((j.config_name, j.test_on, j.train.calibration) for j in jobs))
+    keys = [(j.config_name, j.test_on, j.train.calibration, j.seed) for j in jobs]
+    if len(set(keys)) != len(jobs) or len(jobs) != len(seeds) * len(outputs):
+        raise ValueError(f"jobs trained together need every seed {seeds} once with every (test set, calibration) "
+                         f"{outputs}")
     d = load_job_data(first)
     results = fit_seeds(d.train, d.val, d.rest, d.topo, first.model, first.train, seeds, progress=progress)
     joint = results[0].train_seconds
