@@ -33,7 +33,8 @@ if [ -n "$pid" ] && kill -0 "$pid" 2>/dev/null; then
   echo "re-attaching to the run still going (pid $pid)"
 else
   # a killed Snakemake leaves its lock; nothing else runs here, so a new run may take it over
-  python3 -m snakemake --workflow-profile "workflow/profiles/$profile" --unlock > /dev/null 2>&1
+  [ -n "$(ls -A .snakemake/locks 2>/dev/null)" ] &&
+    python3 -m snakemake --workflow-profile "workflow/profiles/$profile" --unlock > /dev/null 2>&1
   rm -f "$out/snakemake.rc"
   setsid bash -c 'python3 -m snakemake --workflow-profile "$0" --keep-going "${@:2}" >> "$1/snakemake.log" 2>&1
                   echo $? > "$1/snakemake.rc"' "workflow/profiles/$profile" "$out" "${targets[@]}" "$@" \
