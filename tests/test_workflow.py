@@ -131,3 +131,20 @@ def test_judge_dag_when_turned_on(tmp_path):
     assert stats["twin_selection"] == 1 and stats["judge_slides"] == 4 and stats["judge_fold_twin"] == 2
     assert stats["judge_dataset"] == 2 and stats["judge_train"] == 2 * 2 * 2 and stats["slide_loop"] == 1
     assert stats["train_twin_ablation"] == 2 * 2  # A-to-B and A-to-C of the calibrated twin, two seeds
+
+
+def test_paper_recipe_ablation_plan(tmp_path):
+    """The paper profile's recipe ablation (docs/recipe.md, its device-time plan): with train.seeds_together one job
+    per (recipe, switch_off, training set), A-to-B and A-to-C trained once; switch rows for those two only."""
+    listing = dry_run(tmp_path, "-p", "--workflow-profile", str(REPO_ROOT / "workflow/profiles/paper"),
+                      "results/recipe/report/recipe_ablation.csv")
+    stats = job_stats(listing)
+    assert stats["train_recipe_seeds_sim_large"] == 8  # reference, robust minus each of 7 switches
+    # robust, whose job also writes robust minus `calibration` (the same models' raw scores)
+    assert stats["train_recipe_robust_sim_large"] == 1
+    assert stats["train_recipe_seeds_meat_compact"] == 2  # C-to-B: the full recipes
+    assert "train_recipe" not in stats
+    sim = [ln for ln in listing.splitlines() if "SNAKEMAKE_RULE=train_recipe_" in ln and "_sim_large" in ln
+           and "palpation.apps.train" in ln]
+    assert len(sim) == 9 and all("'seeds=[0,1,2,3,4]'" in ln and "'also_test=[A-to-C:meat]'" in ln for ln in sim)
+    assert sum("also_uncalibrated=results/recipe/robust/calibration " in ln for ln in sim) == 1

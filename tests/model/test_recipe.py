@@ -135,3 +135,26 @@ def test_calibration_rescales_the_written_scores_only(train_sets, tmp_path):
     cal = Calibrator(**m1["calibration"])
     assert cal.method == "platt" and np.allclose(p1, cal.apply(p0), atol=1e-6)
     assert m1["test_raw"] == m0["test"] and m1["test"]["auroc"] == pytest.approx(m0["test"]["auroc"], abs=1e-3)
+
+
+def test_robust_recipe_same_seed_identical_on_the_cpu(sets):
+    """Every switch on (their draws come from the seed's stream): a seed trains to the same weights twice, alone
+    and with other seeds (model.stacked), and another seed differs."""
+    import torch
+
+    from palpation.model.stacked import fit_seeds
+
+    rest, _, meat = sets
+    topo = clip_topology(spatial_edges(rest), 3)
+    robust = TrainConfig(batch_size=2, epochs=3, train_batches=2, val_batches=2, norm_stats="full",
+                         rotation="consistent", jitter_px=0.2, marker_dropout=0.01, displacement_scale=0.3,
+                         patience=1, select_metric="ap", calibration="platt")
+    runs = [fit(meat["train"], meat["val"], rest, topo, COMPACT, robust, seed=s) for s in (4, 4, 5)]
+    stacked = [fit_seeds(meat["train"], meat["val"], rest, topo, COMPACT, robust, [4, 5]) for _ in range(2)]
+
+    def same(a, b):
+        return a.history == b.history and all(torch.equal(x, y) for x, y in
+                                               zip(a.model.state_dict().values(), b.model.state_dict().values()))
+
+    assert same(runs[0], runs[1]) and not same(runs[0], runs[2])
+    assert all(same(a, b) for a, b in zip(*stacked))

@@ -25,7 +25,8 @@ def test_tables_have_the_issue_columns_in_order():
     assert "| A-to-B (Sim→Silicone) | robust | jitter | 2 |" in md and "25.0 %" in md and "* a note" in md
     unc = uncertainty_table([{"config": "A-to-B/robust", "coverage": c, "precision": 0.5, "recall": 0.4, "n_pred": 3}
                              for c in (1.0, 0.8, 0.6, 0.4)])
-    assert tuple(unc.columns) == UNCERTAINTY_COLUMNS and unc["coverage"].tolist() == [1.0, 0.8, 0.6, 0.4]
+    assert tuple(unc.columns) == UNCERTAINTY_COLUMNS == ("config", "coverage", "precision", "recall")
+    assert unc["coverage"].tolist() == [1.0, 0.8, 0.6, 0.4]
 
 
 @pytest.fixture
@@ -70,3 +71,14 @@ def test_recipe_report_run_in_mlflow(tmp_path, results_tmp):
     assert "A-to-B/robust/none/d_bar_mm" not in run.data.metrics  # NaN is not logged
     stored = {p.name for p in (results_tmp / "mlartifacts" / "recipe_report").rglob("*.*")}
     assert {"recipe_ablation.csv", "reliability.png", "uncertainty_maps.pdf"} <= stored
+
+
+def test_switch_rows_only_for_the_listed_configurations():
+    from palpation.apps.recipe_report import row_groups
+
+    c = {"experiments": ["A-to-B", "C-to-B"], "recipes": ["reference", "robust"], "switches": ["jitter", "scale"]}
+    full = [("reference", "none"), ("robust", "none")]
+    assert row_groups(c, "C-to-B") == full + [("robust", "jitter"), ("robust", "scale")]  # missing key: all
+    c["switch_experiments"] = ["A-to-B"]  # the paper profile's cut
+    assert row_groups(c, "C-to-B") == full
+    assert row_groups(c, "A-to-B")[2:] == [("robust", "jitter"), ("robust", "scale")]

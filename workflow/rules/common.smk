@@ -5,7 +5,9 @@
 #   conf/       experiments and dataset files (palpation.experiments), run folders (palpation.report.runs)
 import re
 import sys
+from functools import partial
 from pathlib import Path
+from types import SimpleNamespace
 
 from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
@@ -13,7 +15,7 @@ from snakemake_interface_executor_plugins.settings import DeploymentMethod
 
 from palpation.confdeps import conf_files
 from palpation.experiments import dataset_files, experiments
-from palpation.report.runs import run_dir
+from palpation.report.runs import recipe_root, run_dir
 
 
 def config_error(message, profile_file):
@@ -152,28 +154,67 @@ def train_overrides(wildcards, sim=TRAIN_DATA["sim"]):
     return " ".join(data + size_knobs(sizes) + [f"recipe={TRAIN['recipe']}"])
 
 
-def recipe_inputs(wildcards):
-    """The datasets and conf/ files of one recipe-ablation run (its recipe, not the profile's)."""
-    choices = {"experiment": wildcards.exp, "model": EXPERIMENTS[wildcards.exp].model, "recipe": wildcards.recipe}
-    return {**train_data(wildcards), "conf": conf_files("train", choices)}
+def recipe_inputs(wildcards, exps=None):
+    """The datasets and conf/ files of one recipe-ablation run (its recipe, not the profile's); `exps`: the
+    configurations one job trains together (recipe_groups), else the wildcard's one."""
+    exps = exps or [wildcards.exp]
+    data = {k: v for exp in exps for k, v in train_data(SimpleNamespace(exp=exp)).items()}
+    confs = [f for exp in exps for f in conf_files("train", {"experiment": exp, "model": EXPERIMENTS[exp].model,
+                                                           "recipe": wildcards.recipe})]
+    return {**data, "conf": sorted(set(confs))}
 
 
-def recipe_overrides(wildcards):
-    """Dataset paths, the ablation's sizes for this recipe and model, the recipe and the switch turned off."""
+def recipe_overrides(wildcards, exps=None):
+    """Dataset paths, the ablation's sizes for this recipe and model, the recipe and the switch turned off;
+    with `exps` (recipe_groups) the first is the experiment, the others are scored by the same models."""
     from palpation.model.recipe import switch_off
 
-    data = [f"data.{k}={v}" for k, v in train_data(wildcards).items()]
-    sizes = (RECIPE_ABL["sizes"].get(wildcards.recipe) or {}).get(EXPERIMENTS[wildcards.exp].model) or {}
+    exps = exps or [wildcards.exp]
+    data = [f"data.{k}={v}" for k, v in recipe_inputs(wildcards, exps).items() if k != "conf"]
+    sizes = (RECIPE_ABL["sizes"].get(wildcards.recipe) or {}).get(EXPERIMENTS[exps[0]].model) or {}
     knobs = size_knobs(sizes)
     off = [] if wildcards.switch == "none" else switch_off(wildcards.switch)
-    return " ".join(data + knobs + [f"recipe={wildcards.recipe}"] + off)
+    also = [f"'also_test=[{','.join(f'{e}:{EXPERIMENTS[e].test_on}' for e in exps[1:])}]'"] if exps[1:] else []
+    return " ".join(data + knobs + [f"recipe={wildcards.recipe}"] + off + also)
+
+
+def recipe_groups():
+    """The ablation's configurations by what they train on (set and model): A-to-B and A-to-C train the same
+    models on Sim, so with train.seeds_together one job trains them once and scores both test sets."""
+    groups = {}
+    for exp in RECIPE_ABL["experiments"]:
+        groups.setdefault(f"{EXPERIMENTS[exp].train_on}_{EXPERIMENTS[exp].model}", []).append(exp)
+    return groups
+
+
+def recipe_seed_outputs(exps, recipe, *switches):
+    """Outputs of a seeds-together ablation job: every seed of every configuration of `exps`, per switch_off folder."""
+    return {key: [str(run_dir(recipe_root(RECIPE_DIR, recipe, switch), exp, "{clip_len}", seed) / name)
+                  for switch in switches for exp in exps for seed in RECIPE_ABL["seeds"]]
+            for key, name in (("metrics", "metrics.json"), ("scores", "scores.npz"), ("pr", "pr.npz"),
+                              ("checkpoint", "checkpoint.pt"))}
+
+
+def recipe_shares_calibration(exps):
+    """Whether the ablation has robust minus `calibration` rows for these configurations (one training group):
+    the robust job then writes them from its own models (rule train_recipe_robust_<group>)."""
+    return "calibration" in RECIPE_ABL["switches"] and all(
+        ("robust", "calibration") in recipe_switch_groups(exp) for exp in exps)
+
+
+def recipe_switch_groups(exp):
+    """(recipe, switch_off) of every row of configuration `exp`: both full recipes, robust minus each switch
+    where recipe_ablation.switch_experiments (missing: every configuration) lists it."""
+    rows = [(r, "none") for r in ("reference", "robust")]
+    if exp in RECIPE_ABL.get("switch_experiments", RECIPE_ABL["experiments"]):
+        rows += [("robust", s) for s in RECIPE_ABL["switches"]]
+    return rows
 
 
 def recipe_runs(name):
-    """`name` of every run the recipe report reads: both full recipes, robust minus each switch."""
-    groups = [(r, "none") for r in ("reference", "robust")] + [("robust", s) for s in RECIPE_ABL["switches"]]
-    return [f for recipe, switch in groups
-            for f in expand(f"{RECIPE_RUN}/{name}", recipe=recipe, switch=switch, exp=RECIPE_ABL["experiments"],
+    """`name` of every run the recipe report reads."""
+    return [f for exp in RECIPE_ABL["experiments"] for recipe, switch in recipe_switch_groups(exp)
+            for f in expand(f"{RECIPE_RUN}/{name}", recipe=recipe, switch=switch, exp=exp,
                             clip_len=TRAIN["clip_len"], seed=RECIPE_ABL["seeds"])]
 
 

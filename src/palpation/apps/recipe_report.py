@@ -61,6 +61,13 @@ def load_group(c: dict, config: str, recipe: str, switch: str) -> list[dict]:
     return runs
 
 
+def row_groups(c: dict, config: str) -> list[tuple[str, str]]:
+    """(recipe, switch_off) of the rows of `config`: each full recipe, then robust minus each switch where
+    `switch_experiments` (null: every configuration) lists it."""
+    switched = c["experiments"] if c.get("switch_experiments") is None else c["switch_experiments"]
+    return [(r, FULL) for r in c["recipes"]] + [("robust", s) for s in c["switches"] if config in switched]
+
+
 def group_row(config, recipe, switch, runs, maps, settings, layout) -> tuple[dict, list, dict]:
     """The ablation row of one (config, recipe, switch) over its seeds, their map stacks and scores."""
     aurocs = [r["metrics"]["test"]["auroc"] for r in runs]
@@ -93,11 +100,10 @@ def run(cfg: DictConfig) -> dict:
     settings = MapSettings(max_grid_px=int(maps["max_grid_px"]), sim_max_maps=maps["sim"]["max_maps"],
                            sim_vessel_only=bool(maps["sim"]["vessel_only"]), **maps["threshold"])
     layout = silicone_layout(maps)[0] if any(TEST_DATASET[k] == "silicone" for k in c["experiments"]) else None
-    groups = [(r, FULL) for r in c["recipes"]] + [("robust", s) for s in c["switches"]]
     rows, unc_rows, ens_maps, curves, panels, summary = [], [], {}, {}, {}, {}
     for config in c["experiments"]:
         title = f"{config} ({CONFIG_TITLES.get(config, config)})"
-        for recipe, switch in groups:
+        for recipe, switch in row_groups(c, config):
             runs = load_group(c, config, recipe, switch)
             row, stacks, scores = group_row(config, recipe, switch, runs, maps, settings, layout)
             rows.append(row)
@@ -144,7 +150,8 @@ def run(cfg: DictConfig) -> dict:
 
 
 def _track(c: dict, rows: list[dict], out: Path) -> None:
-    params = {k: c[k] for k in ("profile", "experiments", "recipes", "switches", "seeds", "clip_len", "threshold")}
+    params = {k: c.get(k) for k in ("profile", "experiments", "recipes", "switches", "switch_experiments", "seeds",
+                                    "clip_len", "threshold")}
     with tracking.start_run("recipe_report", params, config=c['profile']):
         for r in rows:
             key = f"{r['config']}/{r['recipe']}/{r['switch_off']}"

@@ -3,6 +3,9 @@
     python -m palpation.apps.train experiment=A-to-B seed=0
     python -m palpation.apps.train --multirun experiment=A-to-B seed=0,1,2,3,4
     python -m palpation.apps.train experiment=A-to-B 'seeds=[0,1,2,3,4]' device=cuda   # one process
+    python -m palpation.apps.train experiment=A-to-B 'seeds=[0,1]' 'also_test=[A-to-C:meat]' \
+        hydra.run.dir=results/adhoc/train/A-to-B/L5        # one training, scored on Silicone and Meat
+    ... recipe=robust also_uncalibrated=results/adhoc/uncalibrated   # and its raw scores written there too
 Outputs land in Hydra's run dir (metrics.json, scores.npz, pr.npz, checkpoint.pt) and in MLflow; with
 `seeds`, seed s writes them to <run dir>/seed<s>/ (one MLflow run per seed all the same).
 """
@@ -44,6 +47,24 @@ def _overrides() -> dict:
         return {}
 
 
+def also_tested(cfg: DictConfig, job, out_dir) -> list[tuple[str, str, Path]]:
+    """(config name, test set, run dir) of every `also_test` entry "<name>:<test set>": the run dir
+    <root>/<name>/L<n> beside this one, <root>/<config_name>/L<n>, so each keeps the workflow's run layout."""
+    if not cfg.also_test:
+        return []
+    out_dir = Path(out_dir)
+    if out_dir.name != f"L{job.clip_len}" or out_dir.parent.name != job.config_name:
+        raise ValueError(f"also_test needs the run dir <root>/{job.config_name}/L{job.clip_len} (got {out_dir}): "
+                         "set hydra.run.dir so the other configurations' folders sit beside it")
+    pairs = [str(entry).partition(":") for entry in cfg.also_test]
+    names = [name for name, _, _ in pairs]
+    bad = [f"{n}{c}{t}" for n, c, t in pairs if not c or not n or t not in cfg.data]
+    if bad or job.config_name in names or len(set(names)) != len(names):
+        raise ValueError(f"also_test={list(cfg.also_test)}: list distinct '<config name>:<test set>' entries, test "
+                         f"sets among {sorted(cfg.data)}, names other than config_name ({job.config_name})")
+    return [(name, test_on, out_dir.parents[1] / name / out_dir.name) for name, _, test_on in pairs]
+
+
 def run(cfg: DictConfig, out_dir: str | Path | None = None) -> dict | list[dict]:
     """The job body; `out_dir` defaults to Hydra's output dir. With `seeds`, one metrics dict per seed."""
     if out_dir is None:
@@ -57,10 +78,23 @@ def run(cfg: DictConfig, out_dir: str | Path | None = None) -> dict | list[dict]
         seeds = [int(s) for s in cfg.seeds]
         if not seeds or len(set(seeds)) != len(seeds):
             raise ValueError(f"seeds={seeds}: list distinct seeds, at least one (or seeds=null to train `seed` alone)")
-        jobs = [replace(job, seed=s) for s in seeds]
-        return run_jobs_together(jobs, [Path(out_dir) / f"seed{s}" for s in seeds],
-                                 params=[{**params, "seed": s} for s in seeds], track=bool(cfg.tracking),
-                                 tags=tags, progress=bool(cfg.progress))
+        tests = [(job.config_name, job.test_on, Path(out_dir))] + also_tested(cfg, job, out_dir)
+        jobs = [replace(job, seed=s, config_name=name, test_on=test_on) for name, test_on, _ in tests for s in seeds]
+        dirs = [d / f"seed{s}" for *_, d in tests for s in seeds]
+        per_job = [{**params, "seed": s, "config_name": name, "test_on": test_on} for name, test_on, _ in tests
+                   for s in seeds]
+        if cfg.also_uncalibrated:  # the same models' raw scores: the ablation's robust minus `calibration`
+            if job.train.calibration == "none":
+                raise ValueError(f"also_uncalibrated={cfg.also_uncalibrated}: recipe {cfg.recipe.name} calibrates "
+                                 "nothing; drop also_uncalibrated")
+            root = Path(cfg.also_uncalibrated)
+            dirs += [root / j.config_name / f"L{j.clip_len}" / f"seed{j.seed}" for j in jobs]
+            per_job += [{**p, "recipe": {**p["recipe"], "calibration": "none"}} for p in per_job]
+            jobs += [replace(j, train=replace(j.train, calibration="none")) for j in jobs]
+        return run_jobs_together(jobs, dirs, params=per_job, track=bool(cfg.tracking), tags=tags,
+                                 progress=bool(cfg.progress))
+    if cfg.also_test or cfg.also_uncalibrated:
+        raise ValueError("also_test and also_uncalibrated use the models of `seeds` trained together: pass seeds=[...]")
     return run_job(job, out_dir, params=params, track=bool(cfg.tracking), tags=tags,
                    progress=bool(cfg.progress))
 

@@ -139,6 +139,8 @@ class TrainAppConfig:
     config_name: str = MISSING
     seed: int = MISSING
     seeds: Optional[List[int]] = MISSING  # null: train `seed` alone
+    also_test: List[str] = MISSING  # with seeds: "<config name>:<test set>" scored by the same models
+    also_uncalibrated: Optional[str] = MISSING  # with seeds: where the raw-score twins of the runs go
     clip_len: int = MISSING
     device: str = MISSING
     train_on: str = MISSING

@@ -3,7 +3,8 @@
 Outputs in `out_dir`: checkpoint.pt (weights + normalisation statistics + rest layout), scores.npz
 (`probs`, `labels` of the test central frames, their `sequence`, `frame` ids: palpation.metrics.scores),
 pr.npz (the test PR curve) and metrics.json. `run_jobs_together` does the same for several seeds of one
-configuration trained in one process (palpation.model.stacked), one output folder and MLflow run per seed.
+configuration trained in one process (palpation.model.stacked), one output folder and MLflow run per seed, and
+can score the same models on several test sets (configurations that train alike share the training).
 """
 
 from __future__ import annotations
@@ -74,10 +75,21 @@ def load_job_data(job: TrainJob) -> JobData:
     topo = clip_topology(spatial_edges(rest), job.clip_len)
     train = ClipSet(load_dataset(job.train_on, job.data[job.train_on], "train"), job.clip_len, rest)
     val = ClipSet(load_dataset(job.train_on, job.data[job.train_on], "val"), job.clip_len, rest)
-    test = ClipSet(load_dataset(job.test_on, job.data[job.test_on], "test"), job.clip_len, rest)
+    test = load_test_set(job, rest)
     log.info("%s L=%d: %d train / %d val / %d test clips", job.config_name, job.clip_len, len(train), len(val),
              len(test))
     return JobData(rest, topo, train, val, test)
+
+
+def load_test_set(job: TrainJob, rest: np.ndarray) -> ClipSet:
+    return ClipSet(load_dataset(job.test_on, job.data[job.test_on], "test"), job.clip_len, rest)
+
+
+def training_key(job: TrainJob) -> TrainJob:
+    """What fixes a job's training: everything but its seed, the test set it is scored on and the post-hoc
+    calibration of its scores (fitted after training, on the val split)."""
+    return replace(job, seed=0, config_name="", test_on=job.train_on, data={job.train_on: job.data[job.train_on]},
+                   train=replace(job.train, calibration="none"))
 
 
 def _run_tags(job: TrainJob, tags: dict | None) -> dict:
@@ -102,26 +114,47 @@ def run_job(job: TrainJob, out_dir: str | Path, params: dict | None = None, trac
 def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: list[dict] | None = None,
                       track: bool = True, tags: dict | None = None, progress: bool = False) -> list[dict]:
     """`run_job` for seeds of one configuration (jobs differing only in seed) trained together
-    (palpation.model.stacked); one MLflow run and one output folder per seed, as separate jobs.
+    (palpation.model.stacked); one MLflow run and one output folder per job, as separate jobs.
 
-    The test set is scored by all seeds at once (`predict_seeds`). metrics.json gains `trained_together`
-    (the seeds and the joint training wall seconds); `train_seconds` and `test_seconds` are each seed's
-    share of the joint times."""
+    Jobs may also differ in the test set they are scored on (`config_name`, `test_on`) and in the post-hoc
+    calibration of the scores (`train.calibration`): configurations that train alike (A-to-B and A-to-C both
+    train the large model on Sim) then share one training, each seed's models scored on every test set and
+    written once per calibration; every seed must come with every (test set, calibration).
+
+    Each test set is scored by all seeds at once (`predict_seeds`). metrics.json gains `trained_together`
+    (the seeds and the joint training wall seconds; with several test sets also their `configs`);
+    `train_seconds` and `test_seconds` are each job's share of the joint times."""
     first = jobs[0]
-    if any(replace(j, seed=first.seed) != first for j in jobs):
-        raise ValueError("jobs trained together must differ only in their seed "
+    if any(training_key(j) != training_key(first) for j in jobs):
+        raise ValueError("jobs trained together must differ only in their seed, test set and calibration "
                          f"({first.config_name}, L={first.clip_len}); train other configurations apart")
-    seeds = [j.seed for j in jobs]
+    seeds = list(dict.fromkeys(j.seed for j in jobs))
+    tests = list(dict.fromkeys((j.config_name, j.test_on) for j in jobs))
+    outputs = list(dict.fromkeys((j.config_name, j.test_on, j.train.calibration) for j in jobs))
+    keys = [(j.config_name, j.test_on, j.train.calibration, j.seed) for j in jobs]
+    if len(set(keys)) != len(jobs) or len(jobs) != len(seeds) * len(outputs):
+        raise ValueError(f"jobs trained together need every seed {seeds} once with every (test set, calibration) "
+                         f"{outputs}")
     d = load_job_data(first)
     results = fit_seeds(d.train, d.val, d.rest, d.topo, first.model, first.train, seeds, progress=progress)
     joint = results[0].train_seconds
-    t0 = time.perf_counter()  # the test set scored by all seeds at once; each seed's share of the time
-    scored = predict_seeds([r.model for r in results], [r.stats for r in results], d.test, d.rest, d.topo,
-                           first.train.batch_size, first.train.device, progress)
-    test_share = (time.perf_counter() - t0) / len(jobs)
+    by_seed = dict(zip(seeds, results))
+    together = {"seeds": seeds, "train_seconds": joint}
+    if len(tests) > 1:
+        together["configs"] = [name for name, _ in tests]
+    scored, test_sets = {}, {}
+    for name, test_on in tests:  # each test set scored by all seeds at once; each job's share of the time
+        job = next(j for j in jobs if (j.config_name, j.test_on) == (name, test_on))
+        test_sets[name] = d.test if job.test_on == first.test_on and job.data == first.data \
+            else load_test_set(job, d.rest)
+        t0 = time.perf_counter()
+        per_seed = predict_seeds([r.model for r in results], [r.stats for r in results], test_sets[name], d.rest,
+                                 d.topo, first.train.batch_size, first.train.device, progress)
+        share = (time.perf_counter() - t0) / len(seeds)
+        scored.update({(name, s): (*p, share) for s, p in zip(seeds, per_seed)})
     out = []
-    for i, (job, result, out_dir) in enumerate(zip(jobs, results, out_dirs)):
-        result.train_seconds = joint / len(jobs)
+    for i, (job, out_dir) in enumerate(zip(jobs, out_dirs)):
+        result = replace(by_seed[job.seed], train_seconds=joint / len(jobs))
         ctx = (tracking.start_run("train", params[i] if params else asdict(job),
                                   f"{job.config_name}/L{job.clip_len}",
                                   {**_run_tags(job, tags), "trained_together": ",".join(map(str, seeds))},
@@ -129,9 +162,8 @@ def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: 
         with ctx:
             if track:
                 tracking.log_metric_history(result.steps)
-            together = {"seeds": seeds, "train_seconds": joint}
-            out.append(finish_job(job, result, d, out_dir, track, progress, {"trained_together": together},
-                                  (*scored[i], test_share)))
+            out.append(finish_job(job, result, replace(d, test=test_sets[job.config_name]), out_dir, track,
+                                  progress, {"trained_together": together}, scored[(job.config_name, job.seed)]))
     return out
 
 

@@ -1,0 +1,64 @@
+"""workflow/scripts/gpu_recipe_ablation.sh at toy size on the CPU: one part of the ablation through Snakemake, the
+seeds and the two Sim-trained configurations in one job, packed for the trip back from the device."""
+
+import json
+import os
+import subprocess
+import sys
+import tarfile
+from pathlib import Path
+
+import pytest
+import yaml
+
+from palpation.graph.layout import rest_layout
+from palpation.graph.synthetic import write_meat, write_silicone, write_sim
+from palpation.paths import REPO_ROOT
+
+SCRIPT = REPO_ROOT / "workflow" / "scripts" / "gpu_recipe_ablation.sh"
+TOY = {"train": {"seeds_together": True, "recipe_ablation": {
+    "experiments": ["A-to-B", "A-to-C", "C-to-B"], "seeds": [0, 1], "switches": ["jitter"],
+    "switch_experiments": ["A-to-B", "A-to-C"],
+    "sizes": {"robust": {"large": {"batch_size": 2, "epochs": 2, "train_batches": 2, "val_batches": 1}}}}}}
+
+
+def script(work: Path, out: str, *args: str, **env: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}", "PROFILE": "tiny",
+           "PALPATION_RESULTS": str(work / "results"), **env}
+    return subprocess.run(["bash", str(SCRIPT), out, *args], cwd=work, env=env, capture_output=True, text=True,
+                          timeout=600)
+
+
+@pytest.mark.slow  # Snakemake twice (~1 min on a loaded 2-core machine)
+def test_a_part_runs_packs_and_resumes(tmp_path):
+    work = tmp_path / "wd"
+    work.mkdir()
+    for name in ("Snakefile", "workflow", "conf", "data", "src"):
+        os.symlink(REPO_ROOT / name, work / name)
+    rest = rest_layout("template")  # the workflow's rest layout
+    write_sim(work / "results/sim/dataset", rest, n_traj=7, n_frames=144)  # 2 clips of L=5 each
+    (work / "results/data/silicone").mkdir(parents=True)
+    (work / "results/data/meat").mkdir(parents=True)
+    write_silicone(work / "results/data/silicone/silicone.npz", rest, n_videos=2, n_frames=8)
+    write_meat(work / "results/data/meat/meat.npz", rest, n_frames=(9,) * 5, n_val=2)
+    (work / "toy.yaml").write_text(yaml.safe_dump(TOY))
+    # the datasets are given: only the ablation's rules may run (on the device the profile makes them)
+    args = ["--configfile", "toy.yaml", "--allowed-rules", "train_recipe_seeds_sim_large", "recipe_robust_jitter"]
+
+    bad = script(work, "out", *args, PART="robust_nope")
+    assert bad.returncode == 2 and "PART 'robust_nope'" in bad.stderr
+    done = script(work, "out", *args, PART="robust_jitter")
+    assert done.returncode == 0, (done.stdout + (work / "out/snakemake.log").read_text())[-3000:]
+    assert "4 finished runs" in done.stdout  # 2 seeds x (A-to-B, A-to-C), trained once
+    with tarfile.open(work / "out/recipe_runs.tgz") as tar:
+        names = sorted(tar.getnames())
+    assert names == sorted(f"results/recipe/robust/jitter/{exp}/L5/seed{s}/{f}" for exp in ("A-to-B", "A-to-C")
+                           for s in (0, 1) for f in ("metrics.json", "pr.npz", "scores.npz"))
+    m = json.loads((work / "results/recipe/robust/jitter/A-to-C/L5/seed1/metrics.json").read_text())
+    assert m["test_on"] == "meat" and m["trained_together"] == {**m["trained_together"], "seeds": [0, 1],
+                                                                "configs": ["A-to-B", "A-to-C"]}
+    assert "calibration" in m  # the robust recipe's Platt step ran; jitter was turned off (the part's switch)
+    log = (work / "out/snakemake.log").read_text()
+    assert "recipe.jitter_px=0.0" in log and "'also_test=[A-to-C:meat]'" in log
+    again = script(work, "out", *args, PART="robust_jitter")  # a rerun keeps the finished job
+    assert again.returncode == 0 and "Nothing to be done" in (work / "out/snakemake.log").read_text()
