@@ -352,6 +352,10 @@ def finish(cfg: LoopConfig, problems: list[Problem], fits: dict[str, dict], simu
     if cfg.polish_iters > 0:
         done = polish(problems, {n: s[:cfg.polish_starts] for n, s in starts.items()}, simulate, limits,
                       cfg.polish_iters)
+        log.info("local finish of %d tries: %d twin jobs; fitted MAE %.3f -> %.3f px (mean)", len(problems),
+                 next(iter(done.values()))["jobs_all"] if done else 0,
+                 np.nanmean([d.get("fit_start", np.nan) for d in done.values()]),
+                 np.nanmean([d.get("fit_end", np.nan) for d in done.values()]))
     for p in problems:
         fits[p.name]["params_final"] = dict(p.params)
         fits[p.name]["starts"] = starts[p.name][:cfg.final_refit_starts]
