@@ -70,7 +70,7 @@ class LoopConfig:
     pair_tries: int = 2  # then effect pairs tried jointly (dependent pairs, pairs of the BIC-best subset)
     # compensation guard (loop.refit): every round also re-fits the current parameters with no new effect (the
     # null try, same budget, same twin batches); an effect must pass the gate against it too. Before the final
-    # check, up to final_refit_iters Gauss-Newton steps bring the final twin to its optimum (0 = off)
+    # check, up to final_refit_iters Levenberg-Marquardt steps bring the final twin to its optimum (0 = off)
     null_try: bool = True
     final_refit_iters: int = 3
     # every try (the null try too) is finished by a bounded Levenberg-Marquardt solver after its search
