@@ -344,8 +344,8 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
 
 def finish(cfg: LoopConfig, problems: list[Problem], fits: dict[str, dict], simulate) -> None:
     """The local least-squares finish of each problem's search (loop.polish), from its best distinct trials;
-    fits[name] gains `polish` (fitted MAE before/after), `params_final` and `starts` (the distinct trials
-    the final refit may start from) in place of the search's ranked trials."""
+    fits[name] gains `polish` (fitted MAE before/after), `params_final` and `starts` (the next-best distinct
+    trials the final refit also starts from) in place of the search's ranked trials."""
     limits = {p.name: {**cfg.search.bounds, **p.trust} for p in problems}
     starts = {p.name: distinct_starts(fits[p.name].pop("ranked"), p.searched, limits[p.name],
                                       max(cfg.polish_starts, cfg.final_refit_starts)) for p in problems}
@@ -358,7 +358,7 @@ def finish(cfg: LoopConfig, problems: list[Problem], fits: dict[str, dict], simu
                  np.nanmean([d.get("fit_end", np.nan) for d in done.values()]))
     for p in problems:
         fits[p.name]["params_final"] = dict(p.params)
-        fits[p.name]["starts"] = starts[p.name][:cfg.final_refit_starts]
+        fits[p.name]["starts"] = starts[p.name][1:cfg.final_refit_starts]  # the best: the twin continues from it
         if cfg.polish_iters > 0:
             fits[p.name]["polish"] = done[p.name]
 
