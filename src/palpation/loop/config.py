@@ -70,9 +70,16 @@ class LoopConfig:
     pair_tries: int = 2  # then effect pairs tried jointly (dependent pairs, pairs of the BIC-best subset)
     # compensation guard (loop.refit): every round also re-fits the current parameters with no new effect (the
     # null try, same budget, same twin batches); an effect must pass the gate against it too. Before the final
-    # check, up to final_refit_iters Gauss-Newton steps bring the final twin to its optimum (0 = off)
+    # check, up to final_refit_iters Levenberg-Marquardt steps bring the final twin to its optimum (0 = off)
     null_try: bool = True
     final_refit_iters: int = 3
+    # every try (the null try too) is finished by a bounded Levenberg-Marquardt solver after its search
+    # (loop.polish): polish_iters iterations from its polish_starts best distinct trials (0 = off), so tries
+    # are compared at convergence; the final refit starts from the final twin and final_refit_starts - 1
+    # more distinct trials of the last kept try (a camera found in the wrong basin)
+    polish_iters: int = 2
+    polish_starts: int = 1
+    final_refit_starts: int = 3
     gate_fit_rel: float = 0.3  # gate (loop.gate): a fit that falls this much is kept if the held-out does
     gate_z: float = 2.0  # not move beyond gate_z cluster standard errors either way
     # final check (loop.unexplained): detector noise assumed when the set gives none, the test's level and
@@ -118,8 +125,11 @@ class LoopConfig:
         if self.tries_per_round < 1 or self.pair_tries < 0:
             raise ValueError(f"loop.tries_per_round={self.tries_per_round}, loop.pair_tries={self.pair_tries}: "
                              "need tries_per_round >= 1 and pair_tries >= 0")
-        if self.final_refit_iters < 0:
-            raise ValueError(f"loop.final_refit_iters={self.final_refit_iters}: need >= 0 (0 = no final refit)")
+        if self.final_refit_iters < 0 or self.polish_iters < 0 or self.polish_starts < 1 \
+                or self.final_refit_starts < 1:
+            raise ValueError(f"loop.final_refit_iters={self.final_refit_iters}, loop.polish_iters="
+                             f"{self.polish_iters}, loop.polish_starts={self.polish_starts}, loop.final_refit_starts="
+                             f"{self.final_refit_starts}: need iters >= 0 (0 = off) and starts >= 1")
         if not 0 < self.gate_fit_rel <= 1 or self.gate_z <= 0:
             raise ValueError(f"loop.gate_fit_rel={self.gate_fit_rel}, loop.gate_z={self.gate_z}: need "
                              "0 < gate_fit_rel <= 1 and gate_z > 0")

@@ -28,6 +28,7 @@ from palpation.loop.effects import EFFECTS, PARAMS, Dof, bounds, clip, move
 from palpation.loop.gate import decide, heldout_z
 from palpation.loop.inputs import Target
 from palpation.loop.recalibrate import recalibrate
+from palpation.loop.polish import distinct_starts, polish
 from palpation.loop.refit import NULL, null_problem
 from palpation.progress import bar
 
@@ -62,6 +63,7 @@ class Problem:
     last_signatures: dict | None = None
     final: dict | None = None  # loop.unexplained.final_check of the final twin
     reference_attribution: dict | None = None  # real mode: attribution at the starting twin (loop.real)
+    starts: list[dict] = field(default_factory=list)  # the last kept try's best distinct trials (final refit)
 
     def fit_targets(self) -> list[Target]:
         return [t for t in self.targets if t.fit]
@@ -285,6 +287,7 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                                progress=progress)
             for p in [*trying, *extra]:
                 p.params.update(fits[p.name]["params"])
+            finish(cfg, [*trying, *extra], fits, simulate)  # every try (null too) at its local optimum
             diverged = evaluate([*trying, *extra], simulate, strict=False)
             for q in extra:  # a diverged null try leaves the previous twin as the only reference
                 nulls[q.name[:-len(NULL)]] = None if q.name in diverged else (q.summary(), q.markers, fits[q.name])
@@ -313,7 +316,7 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                     ok0, why0 = decide(n_sum, a, ev0, cfg.min_improvement_px, cfg.min_improvement_rel,
                                        cfg.gate_fit_rel, cfg.gate_z)
                     after["gate_null"] = {**ev0, "why": why0, "fit": n_sum["fit"], "heldout": n_sum["heldout"],
-                                          "params": n_fit["params"]}
+                                          "params": n_fit["params_final"]}
                     if ok and not ok0:
                         why = f"{why}; but not beyond re-fitting alone (null try: {why0})"
                     ok = ok and ok0
@@ -326,6 +329,7 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                     for e in item["effects"]:
                         p.effects.append(e)
                         p.candidates.remove(e)
+                    p.starts = fits[p.name]["starts"]  # the final refit's other starts (loop.refit.converge)
                     queue[p.name] = []  # this round is done
                 else:  # the gate refused: restore the previous twin
                     p.params, p.markers, p.searched = dict(b_params), b_markers, list(b_searched)
@@ -336,6 +340,27 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
             on_round(k, problems)
         rounds.set_postfix_str(f"{sum(not p.done for p in problems)} of {len(problems)} going", refresh=False)
     rounds.close()
+
+
+def finish(cfg: LoopConfig, problems: list[Problem], fits: dict[str, dict], simulate) -> None:
+    """The local least-squares finish of each problem's search (loop.polish), from its best distinct trials;
+    fits[name] gains `polish` (fitted MAE before/after), `params_final` and `starts` (the next-best distinct
+    trials the final refit also starts from) in place of the search's ranked trials."""
+    limits = {p.name: {**cfg.search.bounds, **p.trust} for p in problems}
+    starts = {p.name: distinct_starts(fits[p.name].pop("ranked"), p.searched, limits[p.name],
+                                      max(cfg.polish_starts, cfg.final_refit_starts)) for p in problems}
+    if cfg.polish_iters > 0:
+        done = polish(problems, {n: s[:cfg.polish_starts] for n, s in starts.items()}, simulate, limits,
+                      cfg.polish_iters)
+        log.info("local finish of %d tries: %d twin jobs; fitted MAE %.3f -> %.3f px (mean)", len(problems),
+                 next(iter(done.values()))["jobs_all"] if done else 0,
+                 np.nanmean([d.get("fit_start", np.nan) for d in done.values()]),
+                 np.nanmean([d.get("fit_end", np.nan) for d in done.values()]))
+    for p in problems:
+        fits[p.name]["params_final"] = dict(p.params)
+        fits[p.name]["starts"] = starts[p.name][1:cfg.final_refit_starts]  # the best: the twin continues from it
+        if cfg.polish_iters > 0:
+            fits[p.name]["polish"] = done[p.name]
 
 
 def _record(k: int, p: Problem, item, att, before, after, accepted: bool) -> dict:

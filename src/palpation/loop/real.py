@@ -14,7 +14,8 @@ import numpy as np
 from palpation.loop.attribution import attribute
 from palpation.loop.config import LoopConfig
 from palpation.loop.effects import EFFECTS
-from palpation.loop.engine import MIN_RMS_PX, Problem, evaluate, initial_params, refit_dofs, run_rounds, signatures
+from palpation.loop.engine import (MIN_RMS_PX, Problem, evaluate, finish, initial_params, refit_dofs, run_rounds,
+                                   signatures)
 from palpation.loop.inputs import load_targets, set_key
 from palpation.loop.recalibrate import recalibrate
 from palpation.loop.unexplained import check_all, noise_estimate
@@ -60,6 +61,8 @@ def round_zero(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                            {p.name: [dict(p.params)] for p in problems}, progress=progress)
         for p in problems:
             p.params.update(fits[p.name]["params"])
+        finish(cfg, problems, fits, simulate)  # the calibrated twin at its local optimum (loop.polish)
+        for p in problems:
             p.searched = searched[p.name]
     evaluate(problems, simulate)
     for p in problems:

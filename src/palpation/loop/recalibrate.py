@@ -115,7 +115,8 @@ def recalibrate(problems: list, simulate: Simulate, settings: SearchSettings, db
     for run in runs:
         best = best_trial(run["study"])
         out[run["p"].name] = {"params": dict(best.params), "value": float(best.value), "trial": best.number,
-                              "study": run["study"].study_name, "n_trials": completed(run["study"])}
+                              "study": run["study"].study_name, "n_trials": completed(run["study"]),
+                              "ranked": [dict(t.params) for t in ranked_trials(run["study"])[:RANKED]]}
     return out
 
 
@@ -156,13 +157,22 @@ def propose_parallel(db_path: Path, names: list[str], spaces: list, s: SearchSet
         f.result()
 
 
-def best_trial(study: optuna.Study) -> optuna.trial.FrozenTrial:
+RANKED = 10  # best trials returned per study: the local finish (loop.polish) picks distinct starts among them
+
+
+def ranked_trials(study: optuna.Study) -> list[optuna.trial.FrozenTrial]:
+    """Completed trials that did not diverge, best first (ties: the earlier trial)."""
     ok = [t for t in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))
           if not t.user_attrs.get("diverged", 0.0)]
+    return sorted(ok, key=lambda t: (t.value, t.number))
+
+
+def best_trial(study: optuna.Study) -> optuna.trial.FrozenTrial:
+    ok = ranked_trials(study)
     if not ok:
         raise ValueError(f"loop study '{study.study_name}': every trial diverged; narrow the bounds in "
                          "loop.effects.PARAMS or lower the nominal steps (loop.steps)")
-    return min(ok, key=lambda t: (t.value, t.number))
+    return ok[0]
 
 
 def _key(params: Mapping[str, float]) -> tuple:

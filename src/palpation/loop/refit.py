@@ -9,10 +9,11 @@ contact fit left), and the final check reads it as unexplained. Two guards, both
   current values and Gauss-Newton steps on the refit columns) but without any new effect. An effect is
   kept only if it passes the gate against the null try as well as against the previous twin: its gain
   must go beyond what re-fitting buys with the same effort (engine.run_rounds);
-* the **final refit** (`converge`): before the final check, Gauss-Newton iterations on the refit columns
-  (step halving, a step kept only if the fitted MAE falls and the held-out is not significantly worse)
-  bring the final twin to its optimum, so the residual tested against the detector noise is what the
-  twin cannot reach, not what the search left.
+* the **final refit** (`converge`): before the final check, Levenberg-Marquardt (loop.polish) from the
+  final twin and the last kept try's other distinct best trials, kept only if the fitted MAE falls and the
+  held-out is not significantly worse, brings the final twin to its optimum, so the residual tested
+  against the detector noise is what the twin cannot reach, not what the search left. Every try, the null
+  try included, gets the same local finish after its search (engine.finish), so the gate compares optima.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import numpy as np
 from palpation.loop.attribution import Signature, fit_subset
 from palpation.loop.effects import clip, move
 from palpation.loop.gate import heldout_z
+from palpation.loop.polish import polish
 
 log = logging.getLogger(__name__)
 NULL = "~null"  # suffix of a null try's problem name
@@ -57,50 +59,34 @@ def fit_residual(p) -> np.ndarray:
     return np.stack([p.markers[i] - t.markers for i, t in enumerate(p.targets) if t.fit])
 
 
-def converge(problems: list, simulate, signatures, steps: Mapping[str, float], limits: Mapping | None,
-             iters: int, z_crit: float) -> dict[str, dict]:
-    """Gauss-Newton iterations of every problem's refit dofs, all problems in one batch per iteration.
+def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_crit: float) -> dict[str, dict]:
+    """The final refit: Levenberg-Marquardt (loop.polish) on every problem's searched parameters from its
+    current twin and p.starts (the last kept try's other distinct best trials), all problems in one batch
+    per step. The end point is kept only if the fitted MAE falls and the held-out change is not
+    significantly worse (z >= -z_crit); else the twin stays. Returns per problem the fit/held-out MAE
+    before and after, the LM iterations kept and the starts."""
+    from palpation.loop.engine import evaluate
 
-    `signatures(problems)` returns {name: refit Signature} at their current params. A step (best of the
-    STEP_FRACTIONS) is kept only if the fitted MAE falls and the held-out change is not significantly
-    worse (z >= -z_crit); a problem stops when no step helps. Returns per problem the fit/held-out MAE
-    before and after and the iterations kept."""
     log_ = {p.name: {"before": p.summary(), "kept": 0} for p in problems}
-    going = [p for p in problems if p.refit]
-    for it in range(iters):
-        if not going:
-            break
-        refits = signatures(going)
-        jobs, spans = [], []
-        for p in going:
-            cands = gauss_newton(p, fit_residual(p), refits[p.name], steps, limits)
-            spans.append((p, len(jobs), cands))
-            jobs += [(t.state, c) for c in cands for t in p.targets]
-        markers, failed = simulate(jobs)
-        still = []
-        for p, start, cands in spans:
-            n, best = len(p.targets), None
-            for j, c in enumerate(cands):
-                block, bad = markers[start + j * n:start + (j + 1) * n], failed[start + j * n:start + (j + 1) * n]
-                if bad.any() or not np.all(np.isfinite(block)):
-                    continue
-                s = p.summary(block)
-                if s["fit"] < (best[1]["fit"] if best else p.summary()["fit"]):
-                    best = (c, s, block)
-            if best is None:
-                continue
-            held = [i for i, t in enumerate(p.targets) if not t.fit]
-            z = heldout_z([p.targets[i].markers for i in held], [p.markers[i] for i in held],
-                          [best[2][i] for i in held])["z"] if held else 0.0
-            if z < -z_crit:
-                continue  # the refit overfits the fitted states: stop here
-            p.params, p.markers = dict(best[0]), best[2]
-            log_[p.name]["kept"] += 1
-            still.append(p)
-        going = still
+    going = [p for p in problems if p.searched]
+    old = {p.name: (dict(p.params), p.markers) for p in going}
+    res = polish(going, {p.name: [dict(p.params), *p.starts] for p in going}, simulate,
+                 {p.name: {**(limits or {}), **p.trust} for p in going}, iters)
+    diverged = evaluate(going, simulate, strict=False)
+    for p in going:
+        params, markers = old[p.name]
+        b, a = log_[p.name]["before"], p.summary() if p.name not in diverged else None
+        held = [i for i, t in enumerate(p.targets) if not t.fit]
+        z = heldout_z([p.targets[i].markers for i in held], [markers[i] for i in held],
+                      [p.markers[i] for i in held])["z"] if held and a else 0.0
+        if a is None or a["fit"] >= b["fit"] or z < -z_crit:  # no gain, or it overfits the fitted states
+            p.params, p.markers = params, markers
+        else:
+            log_[p.name].update(kept=res[p.name]["kept"], starts=res[p.name]["chains"])
     for p in problems:
         log_[p.name]["after"] = p.summary()
         if log_[p.name]["kept"]:
-            log.info("loop '%s': final refit, %d Gauss-Newton step(s): fit MAE %.3f -> %.3f px", p.name,
-                     log_[p.name]["kept"], log_[p.name]["before"]["fit"], log_[p.name]["after"]["fit"])
+            log.info("loop '%s': final refit, %d LM step(s) from %d start(s): fit MAE %.3f -> %.3f px", p.name,
+                     log_[p.name]["kept"], log_[p.name]["starts"], log_[p.name]["before"]["fit"],
+                     log_[p.name]["after"]["fit"])
     return log_

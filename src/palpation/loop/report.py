@@ -128,7 +128,8 @@ def verdict_lines(p: Problem, meta: Mapping) -> list[str]:
                  + ", ".join(f"{r['effect']} (round {r['round']})" for r in nulled) + ".")
     rf = f.get("refit")
     if rf and rf["kept"]:
-        L.append(f"* Final refit ({rf['kept']} Gauss-Newton step(s) of the fitted parameters): fitted MAE "
+        L.append(f"* Final refit ({rf['kept']} Levenberg-Marquardt step(s) of the fitted parameters, best of "
+                 f"{rf.get('starts', 1)} start(s)): fitted MAE "
                  f"{rf['before']['fit']:.2f} → {rf['after']['fit']:.2f} px, held-out {rf['before']['heldout']:.2f} → "
                  f"{rf['after']['heldout']:.2f} px.")
     t = f.get("test")

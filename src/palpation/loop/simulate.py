@@ -11,6 +11,7 @@ batches: every env costs the longest env's frames.
 from __future__ import annotations
 
 import logging
+import time
 from dataclasses import dataclass, replace
 from typing import Mapping
 
@@ -64,6 +65,7 @@ class LoopSimulator:
         self.max_frames = max_frames
         self._bindings: dict[tuple, CameraBinding] = {}
         self.envs_simulated = 0  # distinct physics simulated so far (for the budget log)
+        self.calls, self.sim_s = 0, 0.0  # twin calls (sequential batches) and the time spent in them
 
     def binding(self, camera: Mapping[str, float]) -> CameraBinding:
         image = ImageSimilarity(**{k: float(v) for k, v in camera.items()})
@@ -77,6 +79,14 @@ class LoopSimulator:
         """(n, 127, 2) float64 pixels (NaN where the env diverged) and (n,) failed flags."""
         if not jobs:
             return np.zeros((0, len(self.template), 2)), np.zeros(0, bool)
+        t0 = time.perf_counter()
+        try:
+            return self._simulate(jobs)
+        finally:
+            self.calls += 1
+            self.sim_s += time.perf_counter() - t0
+
+    def _simulate(self, jobs: list[Job]) -> tuple[np.ndarray, np.ndarray]:
         parts = [split(params) for _, params in jobs]
         physics = [(s.kind, s.depth_mm, s.angle_deg, s.heading_offset_deg, tuple(sorted(env.items())),
                     tuple(sorted(mount.items()))) for (s, _), (env, _, mount, _) in zip(jobs, parts)]

@@ -172,24 +172,13 @@ def final_check(p, sigs: list[Signature], cond: Mapping[str, Signature], refit: 
 def check_all(problems: list, simulate, cfg, sigmas: Mapping[str, float]) -> None:
     """The final check of every problem, in one signature batch for those whose twin moved since their
     last round's signatures (a round that kept an effect); the result lands in problem.final."""
-    from dataclasses import replace
-
     from palpation.loop.engine import evaluate, refit_dofs, signatures
     from palpation.loop.refit import converge
 
     evaluate([p for p in problems if p.markers is None], simulate)
     polished = {}
     if cfg.final_refit_iters > 0:  # test what the twin cannot reach, not what the search left (loop.refit)
-        for p in problems:
-            p.refit = refit_dofs(p)
-
-        def refit_columns(ps):
-            for p in ps:
-                p.refit = refit_dofs(p)
-            return signatures([replace(p, candidates=[]) for p in ps], simulate, dict(cfg.steps))[1]
-
-        polished = converge(problems, simulate, refit_columns, dict(cfg.steps), cfg.search.bounds,
-                          cfg.final_refit_iters, cfg.gate_z)
+        polished = converge(problems, simulate, cfg.search.bounds, cfg.final_refit_iters, cfg.gate_z)
     stale = [p for p in problems if p.last_signatures is None or p.last_signatures["params"] != p.params]
     for p in stale:
         p.refit = refit_dofs(p)
