@@ -41,16 +41,17 @@ targets="results/judge/twin_selection.csv results/judge/twin_selection.md result
 snake=(python3 -m snakemake --workflow-profile "workflow/profiles/$profile" --cores "${CORES:-$(nproc)}")
 "${snake[@]}" --unlock > /dev/null 2>&1  # a run cut short keeps the lock; no other run is going (pid file)
 start=$(date +%s)
+touch "$out/snakemake.log"; seen=$(wc -l < "$out/snakemake.log")  # the log grows over resumed calls
 # shellcheck disable=SC2086
 timeout -s INT "${LIMIT_S:-0}" "${snake[@]}" --keep-going --rerun-incomplete $targets "$@" \
   >> "$out/snakemake.log" 2>&1
 rc=$?
 echo "gpu_judge ($profile) snakemake rc=$rc after $(( $(date +%s) - start )) s"
 [ "$rc" = 124 ] && echo "stopped at LIMIT_S=$LIMIT_S s: run the same command again on this warm machine to resume"
-grep -E "steps \(|Error in rule|Exiting" "$out/snakemake.log" | tail -4
+tail -n +"$((seen + 1))" "$out/snakemake.log" | grep -E "steps \(|Nothing to be done|Error in rule|Exiting" | tail -4
 for f in results/judge/twin_selection.csv results/judge/twin_selection.md results/judge/slide_motion.png \
   results/judge/slide_motion.pdf results/loop_slides/loop_slides.csv results/loop_slides/slide_loop.json; do
-  [ -f "$f" ] && cp "$f" "$out/"
+  if [ -f "$f" ]; then cp "$f" "$out/"; else rm -f "$out/$(basename "$f")"; fi  # no stale copy
 done
 tar czf "$out/judge_logs.tgz" results/logs results/judge/slides/*.json \
   $(ls results/judge/train/*/*/L*/seed*/metrics.json results/train/A-to-[BC]/L*/seed*/metrics.json 2>/dev/null) \
