@@ -29,8 +29,10 @@ if [ -f "$pidf" ] && kill -0 "$(cat "$pidf")" 2>/dev/null; then
 fi
 echo $$ > "$pidf"
 export PYTHONPATH="$PWD/src${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
-python3 -c "import warp as wp, hydra, optuna, snakemake, torch; wp.init(); print('warp', wp.__version__, \
-'cuda' if torch.cuda.is_available() else 'no cuda')" || { rm -f "$pidf"; exit 3; }
+device=$(sed -n 's/^device: *\([a-z]*\).*/\1/p' "conf/workflow/$profile.yaml")
+python3 -c "import sys, warp as wp, hydra, optuna, snakemake; wp.init(); print('warp', wp.__version__, wp.get_cuda_devices())
+sys.exit('gpu_judge: the $profile profile runs on cuda, and Warp sees no CUDA device' if '$device' == 'cuda' \
+and not wp.get_cuda_devices() else 0)" || { rm -f "$pidf"; exit 3; }
 # the carried mesh must look newer than its conf so that rule mesh (gmsh) never reruns here; touched once only,
 # so a resumed run does not see it change under the jobs already done
 for c in conf/mesh.yaml "conf/twin/mesh/$res.yaml"; do
