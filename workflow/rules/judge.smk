@@ -6,7 +6,8 @@
 # calibrated's Sim set = the twin ablation's (dataset.smk); calibrated and the fold twins train here
 # (results/judge/train/<twin>), all seeds of a configuration in one process where train.seeds_together.
 # Needs common.smk (JUDGE*, judge_* helpers, PY, TWIN_ARGS, fit_overrides, hydra_dir) and the rule files above.
-# Opt-in: judge.seeds [] (quick) leaves it out of `all`; the paper and tiny profiles turn it on.
+# Opt-in: judge.seeds [] (quick, tiny) leaves it out of `all`; the paper profile turns it on, and
+# workflow/profiles/tiny/judge.yaml does for tiny (the CPU check of workflow/scripts/gpu_judge.sh).
 
 JUDGE_CONF = conf_files("twin_judge", {"twin/mesh": config["twin_resolution"]})
 
