@@ -2,7 +2,7 @@
 
 import pytest
 
-from palpation.loop.judge_budget import slide_loop_envs, twin_seconds
+from palpation.loop.judge_budget import budget, slide_loop_envs, twin_seconds
 
 
 def test_slide_loop_envs_worst_case_keeps_the_largest_rounds():
@@ -21,3 +21,8 @@ def test_twin_seconds_fits_frames_times_a_plus_b_envs():
     assert a == pytest.approx(0.002) and b == pytest.approx(0.0003)
     with pytest.raises(ValueError, match="bench_twin.json"):
         twin_seconds(rows, "coarse")
+
+
+def test_only_a_cuda_profile_with_the_judge_on_is_priced():
+    with pytest.raises(ValueError, match=r"conf/workflow/quick\.yaml: judge_budget prices"):
+        budget("quick", "unused")

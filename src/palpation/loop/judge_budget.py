@@ -83,13 +83,17 @@ def slide_work(profile: dict, sequences: str, mesh: str | None) -> dict:
 
 def budget(profile: str, sequences: str, mesh: str | None = None) -> dict:
     profile_name = profile
-    profile = yaml.safe_load((REPO_ROOT / "conf" / "workflow" / f"{profile_name}.yaml").read_text())
+    path = REPO_ROOT / "conf" / "workflow" / f"{profile_name}.yaml"
+    profile = yaml.safe_load(path.read_text())
+    if profile.get("device") != "cuda" or not profile.get("judge", {}).get("seeds"):
+        raise ValueError(f"{path}: judge_budget prices a profile that runs the judge on cuda (device: cuda, "
+                         "judge.seeds not empty), e.g. --profile paper")
     docs = REPO_ROOT / "docs" / "results"
     a, b = twin_seconds(json.loads((docs / "bench_twin.json").read_text()), profile["twin_resolution"])
     rules = {r["profile"]: r["per_rule"] for r in json.loads((docs / "bench_reproduction.json").read_text())}
     measured = rules.get("paper", {})
     train = json.loads((docs / "bench_train.json").read_text())["wall_s"]
-    seeds = len(profile["judge"]["seeds"]) or 1
+    seeds = len(profile["judge"]["seeds"])
     together = bool(profile["train"].get("seeds_together"))
     work = slide_work(profile, sequences, mesh)
     f = work["replay_frames"]
