@@ -122,15 +122,18 @@ def test_local_slurm_profile_dry_run(tmp_path):
 
 def test_judge_dag_when_turned_on(tmp_path):
     """Issue 12: judge.seeds [] keeps the judge out of `all`; seeds turn on exactly its jobs: the fold twins,
-    a replay per candidate, the fold twins' Sim sets and runs, the calibrated twin's runs (twin ablation
-    rule) and photo_loop's A-to-C (the main sweep's rule), and the table."""
+    a replay per candidate, the fold twins' Sim sets, the runs of calibrated and the fold twins (one per seed,
+    or one per configuration with train.seeds_together), photo_loop's A-to-C (the main sweep's rule), the table."""
     assert "twin_selection" not in job_stats(dry_run(tmp_path))
     extra = tmp_path / "judge.yaml"
     extra.write_text("judge: {seeds: [0, 1], slide_loop: 'trials=[1,2] frames=[5,7]'}\n")
     stats = job_stats(dry_run(tmp_path, "--configfile", str(extra)))
     assert stats["twin_selection"] == 1 and stats["judge_slides"] == 4 and stats["judge_fold_twin"] == 2
-    assert stats["judge_dataset"] == 2 and stats["judge_train"] == 2 * 2 * 2 and stats["slide_loop"] == 1
-    assert stats["train_twin_ablation"] == 2 * 2  # A-to-B and A-to-C of the calibrated twin, two seeds
+    assert stats["judge_dataset"] == 2 and stats["judge_train"] == 3 * 2 * 2 and stats["slide_loop"] == 1
+    assert "train_twin_ablation" not in stats and stats["simulate_dataset_calibrated"] == 1
+    extra.write_text("judge: {seeds: [0, 1], slide_loop: 'trials=[1,2] frames=[5,7]'}\ntrain: {seeds_together: true}\n")
+    stats = job_stats(dry_run(tmp_path, "--configfile", str(extra)))
+    assert stats["judge_train_seeds"] == 3 * 2 and "judge_train" not in stats  # 3 twins x A-to-B/A-to-C
 
 
 def test_paper_recipe_ablation_plan(tmp_path):

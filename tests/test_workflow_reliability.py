@@ -264,10 +264,9 @@ def test_changed_config_reruns_exactly_the_affected_rules(runs):
     main = {(e, s) for e in large for s in profile["seeds"]}
     judge_seeds = tiny.get("judge", {}).get("seeds", [])
     judged = [e for e in ("A-to-B", "A-to-C") if is_large(e)]  # judge.smk: JUDGE_EXPERIMENTS
-    if judge_seeds:  # photo_loop = the main sweep's rule train; calibrated = train_twin_ablation; two fold twins
+    if judge_seeds:  # photo_loop = the main sweep's rule train; calibrated and two fold twins = judge_train
         main |= {(e, s) for e in judged for s in judge_seeds}
-        expected.update(train_twin_ablation=len(judged) * len(judge_seeds),
-                        judge_train=2 * len(judged) * len(judge_seeds), twin_selection=1)
+        expected.update(judge_train=3 * len(judged) * len(judge_seeds), twin_selection=1)
     expected.update(train=len(main))
     assert edit_reruns(work, "conf/workflow/tiny.yaml", bigger_large_model) == expected
     assert job_stats(snakemake(work, "-n")) == Counter(), "restoring the configs restores the state"

@@ -169,7 +169,8 @@ def test_explanation_conditions_and_bad_file(tmp_path):
     with pytest.raises(ValueError, match=r"e\.yaml: seed_sweep\[0\]"):
         load_explanations(bad)
     assert set(load_explanations(EXPLANATIONS)) <= {"run", "data", "calibration", "loop", "seed_sweep", "table3",
-                                                    "table4_markers", "table4_maps", "twin_ablation"}
+                                                    "table4_markers", "table4_maps", "twin_ablation", "recipe_ablation",
+                                                    "twin_selection"}
 
 
 def test_write_is_atomic(tmp_path, monkeypatch):

@@ -119,3 +119,10 @@ def test_results_page_section_checks_the_aims():
     assert checks["heldout MAE drop vs calibrated"][2] == pytest.approx(0.25)  # 25 % < the 30 % aim
     sec = twin_selection_section(df)
     assert "**yes**" in sec.body and any("missed by 0.06" in b for b in sec.bullets)
+    rounds = pd.DataFrame({"fold": ["odd", "odd", "even"], "round": [0, 1, 0], "effect_added": ["none", "stiffness", "none"],
+                           "mae_fit_px": [4.0, 2.0, 4.5], "mae_heldout_px": [4.0, 3.0, 5.0],
+                           "vessel_ratio_sim": [1.1, 1.2, 1.0], "vessel_ratio_real": [1.3, 1.3, 0.8]})
+    sec = twin_selection_section(df, rounds)
+    assert "| odd | 1 | stiffness | 2.000 | 3.000 | 1.20 / 1.30 |" in sec.body
+    assert "slide loop, fold odd: held-out motion MAE 4.000 -> 3.000 px (-25 %); added: stiffness." in sec.bullets
+    assert "slide loop, fold even: held-out motion MAE 5.000 -> 5.000 px (+0 %); added: nothing." in sec.bullets

@@ -258,6 +258,7 @@ def maps_inputs(wildcards):
 JUDGE_DIR = "results/judge"
 JUDGE_FOLDS = ["odd", "even"]
 JUDGE_TWINS = ["calibrated", "photo_loop"] + [f"slide_loop_{f}" for f in JUDGE_FOLDS]
+JUDGE_TRAINED = ["calibrated"] + [f"slide_loop_{f}" for f in JUDGE_FOLDS]  # runs judge.smk trains (photo_loop: the sweep's)
 JUDGE_RUN = str(run_dir(f"{JUDGE_DIR}/train/{{twin}}", "{exp}", "{clip_len}", "{seed}"))
 JUDGE_EXPERIMENTS = ["A-to-B", "A-to-C"]  # Sim -> Silicone (cross-fitted), Sim -> Meat
 JUDGE_FILES = (
@@ -275,7 +276,7 @@ def judge_fit(twin):
 
 
 def judge_runs_root(twin):
-    return {"calibrated": f"{TRAIN_DIR}/twin_calibrated", "photo_loop": TRAIN_DIR}.get(twin, f"{JUDGE_DIR}/train/{twin}")
+    return TRAIN_DIR if twin == "photo_loop" else f"{JUDGE_DIR}/train/{twin}"
 
 
 def judge_scores():
@@ -284,6 +285,9 @@ def judge_scores():
 
 
 def judge_sim(wildcards):
+    """A trained candidate's Sim set: the calibrated twin's is the twin ablation's (same draws), a fold twin's its own."""
+    if wildcards.twin == "calibrated":
+        return rules.simulate_dataset_calibrated.output.manifest
     return f"{JUDGE_DIR}/sim/{wildcards.twin}/manifest.json"
 
 

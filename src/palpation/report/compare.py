@@ -48,6 +48,8 @@ SOURCES = {
     "recipe_ablation": Source("recipe/report/recipe_ablation.csv",
                               ("config", "recipe", "switch_off", "seeds", "auroc_mean", "auroc_std", "ap_mean", "ap_std",
                                "pos_share_05", "ece", "d_bar_mm"), "recipe_report"),
+    "loop_slides": Source("loop_slides/loop_slides.csv", ("fold", "round", "effect_added", "mae_fit_px", "mae_heldout_px",
+                                                         "vessel_ratio_sim", "vessel_ratio_real"), "slide_loop"),
     "twin_selection": Source("judge/twin_selection.csv",
                              ("twin", "fitted_on", "heldout_slide_mae_px", "vessel_ratio_sim", "vessel_ratio_real",
                               "silicone_ap_crossfit", "silicone_auroc_crossfit", "meat_ap", "meat_auroc",

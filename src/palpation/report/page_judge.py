@@ -37,7 +37,25 @@ def aim_checks(df: pd.DataFrame) -> list[tuple[str, str, float, str, float, floa
     return out
 
 
-def twin_selection_section(df: pd.DataFrame) -> Section:
+def slide_loop_rounds(rounds: pd.DataFrame) -> tuple[str, list[str]]:
+    """The slide loop's table (per fold and round) and one bullet per fold: held-out MAE first -> last round."""
+    rows = [[r["fold"], int(r["round"]), r["effect_added"], num(r["mae_fit_px"], 3), num(r["mae_heldout_px"], 3),
+             f"{num(r['vessel_ratio_sim'], 2)} / {num(r['vessel_ratio_real'], 2)}"] for _, r in rounds.iterrows()]
+    bullets = []
+    for fold, g in rounds.sort_values("round").groupby("fold", sort=False):
+        first, last = float(g["mae_heldout_px"].iloc[0]), float(g["mae_heldout_px"].iloc[-1])
+        added = ", ".join(e for e in g["effect_added"].iloc[1:]) or "nothing"
+        change = f" ({100 * (last / first - 1):+.0f} %)" if first > 0 else ""
+        bullets.append(f"slide loop, fold {fold}: held-out motion MAE {first:.3f} -> {last:.3f} px{change}; "
+                       f"added: {added}.")
+    text = ("\n\nThe slide loop per fold and round (`loop_slides/loop_slides.csv`; each fold fitted on its trials, "
+            "scored on the other fold's):\n\n"
+            + markdown(["Fold", "Round", "Effect added", "MAE fit (px)", "MAE held-out (px)",
+                        "Vessel ratio sim / real (held-out)"], rows))
+    return text, bullets
+
+
+def twin_selection_section(df: pd.DataFrame, rounds: pd.DataFrame | None = None) -> Section:
     rows = [[r["twin"], str(r["fitted_on"]).replace("|", "/"), num(r["heldout_slide_mae_px"], 3),
              f"{num(r['vessel_ratio_sim'], 2)} / {num(r['vessel_ratio_real'], 2)}", num(r["silicone_ap_crossfit"]),
              num(r["silicone_auroc_crossfit"]), num(r["meat_ap"]), num(r["meat_auroc"]),
@@ -52,4 +70,8 @@ def twin_selection_section(df: pd.DataFrame) -> Section:
             + markdown(["Twin", "Fitted on", "Held-out slide MAE (px)", "Vessel ratio sim / real",
                         "Silicone AP (x-fit)", "Silicone AUROC (x-fit)", "Meat AP", "Meat AUROC",
                         "Silicone positive at 0.5", "Seeds", "Chosen"], rows))
+    if rounds is not None and len(rounds):
+        text, fold_bullets = slide_loop_rounds(rounds)
+        body += text
+        bullets += fold_bullets
     return Section("twin_selection", TITLES["twin_selection"], body, bullets, gaps, set(df["twin"]))

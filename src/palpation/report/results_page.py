@@ -154,7 +154,7 @@ def sections(root: Path, k: float = 2.0) -> dict[str, Section | None]:
                                                     read_json(root / "maps" / "silicone_pose_check.json")),
         "twin_ablation": lambda: training.twin_ablation_section(t["twin_ablation"], k),
         "recipe_ablation": lambda: recipe_ablation_section(t["recipe_ablation"]),
-        "twin_selection": lambda: twin_selection_section(t["twin_selection"]),
+        "twin_selection": lambda: twin_selection_section(t["twin_selection"], t["loop_slides"]),
     }
     return {key: build[key]() if t[key] is not None else None for key in ORDER}
 

@@ -1,0 +1,45 @@
+"""workflow/scripts/gpu_judge.sh (issue 12's judge on the GPU): its guards, without running Snakemake."""
+
+import os
+import re
+import subprocess
+
+from palpation.paths import REPO_ROOT
+
+SCRIPT = REPO_ROOT / "workflow" / "scripts" / "gpu_judge.sh"
+
+
+def _run(wd, *args, **env):
+    return subprocess.run(["bash", str(SCRIPT), *args], cwd=wd, capture_output=True, text=True, timeout=30,
+                          env={**os.environ, **env})
+
+
+def test_missing_carried_mesh_is_one_line_naming_the_file(tmp_path):
+    (tmp_path / "conf").symlink_to(REPO_ROOT / "conf")
+    out = _run(tmp_path, "out")
+    assert out.returncode == 2 and out.stderr.count("\n") == 1
+    assert "results/twin/mesh_reference.npz missing" in out.stderr and "carry it" in out.stderr
+    out = _run(tmp_path, "out", PROFILE="nope")
+    assert out.returncode == 2 and "conf/workflow/nope.yaml" in out.stderr
+
+
+def test_a_second_call_while_one_runs_only_reports(tmp_path):
+    (tmp_path / "conf").symlink_to(REPO_ROOT / "conf")
+    for f in ("twin/mesh_coarse.npz", "twin/mesh_coarse.json", "data/photos/measured_photos.npz",
+              "data/photos/measured_photos.json"):
+        (tmp_path / "results" / f).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / "results" / f).write_text("")
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "gpu_judge.pid").write_text(str(os.getpid()))  # this test's process: alive
+    (tmp_path / "out" / "snakemake.log").write_text("7 of 25 steps (28%) done\n")
+    out = _run(tmp_path, "out", PROFILE="tiny")
+    assert out.returncode == 0 and "already running" in out.stdout and "7 of 25 steps" in out.stdout
+
+
+def test_targets_are_the_judge_outputs_of_the_rules():
+    targets = set(re.findall(r"results/[\w/]+\.(?:csv|md|png|pdf)", SCRIPT.read_text().split("targets=")[1]
+                             .split("snake=")[0]))
+    judge = (REPO_ROOT / "workflow" / "rules" / "common.smk").read_text()
+    assert {"results/judge/twin_selection.csv", "results/loop_slides/loop_slides.csv"} <= targets
+    for name in ("twin_selection.csv", "twin_selection.md", "slide_motion.png", "slide_motion.pdf"):
+        assert f"results/judge/{name}" in targets and name in judge  # JUDGE_FILES
