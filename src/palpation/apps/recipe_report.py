@@ -5,6 +5,8 @@ Reads <runs_root>/<recipe>/<switch_off>/<config>/L<clip_len>/seed<seed>/ (rule t
 recipe_ablation.csv/.md, uncertainty.csv, reliability.png/.pdf (per test set, the full recipes),
 uncertainty_maps.png/.pdf (beside Fig. 7), ensemble_<config>_<recipe>.npz and recipe_report.json.
 The vessel maps use conf/vessel_maps.yaml's data, Silicone layout and threshold rule (its owner).
+A missing run is an error; partial=true (a table from the runs a device session finished) leaves such rows
+out whole and lists them (recipe_report.json `left_out`, the .md notes, the results page).
 """
 
 from __future__ import annotations
