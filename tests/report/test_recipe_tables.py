@@ -82,3 +82,29 @@ def test_switch_rows_only_for_the_listed_configurations():
     c["switch_experiments"] = ["A-to-B"]  # the paper profile's cut
     assert row_groups(c, "C-to-B") == full
     assert row_groups(c, "A-to-B")[2:] == [("robust", "jitter"), ("robust", "scale")]
+
+
+def test_partial_report_leaves_out_rows_with_missing_runs_and_says_so(tmp_path):
+    """partial=true: a row with a missing seed is reported missing (never averaged over fewer); off, it is an error."""
+    import json
+
+    from palpation.apps.recipe_report import load_group, partial_note
+    from palpation.report.page_recipe import recipe_ablation_section
+    from palpation.report.runs import recipe_root, run_dir
+
+    c = {"runs_root": str(tmp_path), "seeds": [0, 1], "clip_len": 5}
+    d = run_dir(recipe_root(tmp_path, "robust", "none"), "A-to-B", 5, 0)
+    d.mkdir(parents=True)
+    (d / "metrics.json").write_text(json.dumps({"test": {"auroc": 0.7, "ap": 0.3}}))
+    with pytest.raises(FileNotFoundError, match="seed1.*partial=true"):
+        load_group(c, "A-to-B", "robust", "none")
+    runs, missing = load_group({**c, "partial": True}, "A-to-B", "robust", "none")
+    assert [r["seed"] for r in runs] == [0] and missing == [1]
+    assert load_group({**c, "partial": True}, "A-to-B", "robust", "jitter") == ([], [0, 1])
+    left = [{"config": "A-to-B", "recipe": "robust", "switch_off": "jitter", "missing_seeds": [0, 1]}]
+    assert "A-to-B robust minus jitter (seeds [0, 1])" in partial_note(left, "out of device time")
+    df = recipe_ablation([_row("robust", "none", 0.3)])
+    body = recipe_ablation_section(df, {"left_out": left, "partial_reason": "out of device time"}).body
+    assert "**Partial table**: 1 row(s)" in body and "switch off `jitter`: runs of seeds 0, 1 missing" in body
+    assert "out of device time" in body
+    assert "Partial" not in recipe_ablation_section(df, {"left_out": []}).body

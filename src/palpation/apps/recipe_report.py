@@ -5,6 +5,8 @@ Reads <runs_root>/<recipe>/<switch_off>/<config>/L<clip_len>/seed<seed>/ (rule t
 recipe_ablation.csv/.md, uncertainty.csv, reliability.png/.pdf (per test set, the full recipes),
 uncertainty_maps.png/.pdf (beside Fig. 7), ensemble_<config>_<recipe>.npz and recipe_report.json.
 The vessel maps use conf/vessel_maps.yaml's data, Silicone layout and threshold rule (its owner).
+A missing run is an error; partial=true (a table from the runs a device session finished) leaves such rows
+out whole and lists them (recipe_report.json `left_out`, the .md notes, the results page).
 """
 
 from __future__ import annotations
@@ -45,20 +47,24 @@ def maps_config(c: dict) -> dict:
     return maps
 
 
-def load_group(c: dict, config: str, recipe: str, switch: str) -> list[dict]:
+def load_group(c: dict, config: str, recipe: str, switch: str) -> tuple[list[dict], list[int]]:
+    """The finished runs of one row and the seeds whose run is missing. Missing runs raise unless
+    `partial` is on (a table from the runs a device session finished; the row is then left out whole)."""
     runs, missing = [], []
     for seed in c["seeds"]:
         d = run_dir(recipe_root(c["runs_root"], recipe, switch), config, c["clip_len"], seed)
         if not (d / "metrics.json").exists():
-            missing.append(str(d / "metrics.json"))
+            missing.append(seed)
             continue
         fix = "rerun the train_recipe rule for this run"
         runs.append({"seed": seed, "dir": str(d), "scores": str(d / "scores.npz"),
                      "metrics": read_json(d / "metrics.json", fix)})
-    if missing:
-        raise FileNotFoundError(f"{len(missing)} recipe run(s) missing, e.g. {missing[:2]}; run the train_recipe "
-                                "rule (snakemake) or palpation.apps.train with recipe=... for them first")
-    return runs
+    if missing and not c.get("partial"):
+        example = run_dir(recipe_root(c["runs_root"], recipe, switch), config, c["clip_len"], missing[0])
+        raise FileNotFoundError(f"{len(missing)} recipe run(s) missing, e.g. {example / 'metrics.json'}; run the "
+                                "train_recipe rule (snakemake) or palpation.apps.train with recipe=... for them "
+                                "first (or partial=true for a table of the rows that ran)")
+    return runs, missing
 
 
 def row_groups(c: dict, config: str) -> list[tuple[str, str]]:
@@ -100,11 +106,15 @@ def run(cfg: DictConfig) -> dict:
     settings = MapSettings(max_grid_px=int(maps["max_grid_px"]), sim_max_maps=maps["sim"]["max_maps"],
                            sim_vessel_only=bool(maps["sim"]["vessel_only"]), **maps["threshold"])
     layout = silicone_layout(maps)[0] if any(TEST_DATASET[k] == "silicone" for k in c["experiments"]) else None
-    rows, unc_rows, ens_maps, curves, panels, summary = [], [], {}, {}, {}, {}
+    rows, unc_rows, ens_maps, curves, panels, summary, left_out = [], [], {}, {}, {}, {}, []
     for config in c["experiments"]:
         title = f"{config} ({CONFIG_TITLES.get(config, config)})"
         for recipe, switch in row_groups(c, config):
-            runs = load_group(c, config, recipe, switch)
+            runs, missing = load_group(c, config, recipe, switch)
+            if missing:  # partial: a row is all its seeds or left out, never a mean of fewer
+                left_out.append({"config": config, "recipe": recipe, "switch_off": switch, "missing_seeds": missing})
+                log.warning("%s %s -%s left out: runs of seeds %s missing", config, recipe, switch, missing)
+                continue
             row, stacks, scores = group_row(config, recipe, switch, runs, maps, settings, layout)
             rows.append(row)
             log.info("%s %s -%s: AP %.4f ± %.4f, positive at 0.5 %.1f %%, ECE %.4f, d-bar %.2f mm", config, recipe,
@@ -129,6 +139,9 @@ def run(cfg: DictConfig) -> dict:
                              "pixel_coverage": pixel_curve, "unsure_pixels": int(ens.unsure.sum()),
                              "visited_pixels": int(ens.visited.sum()),
                              "calibration": [r["metrics"].get("calibration") for r in runs]}
+    if not rows:
+        raise FileNotFoundError(f"no recipe row has all its runs under {c['runs_root']} (seeds {c['seeds']}); "
+                                "train them first (rule train_recipe)")
     table, unc = recipe_ablation(rows), uncertainty_table(unc_rows)
     for df, name in ((table, "recipe_ablation.csv"), (unc, "uncertainty.csv")):
         with atomic_path(out / name) as tmp:
@@ -137,16 +150,29 @@ def run(cfg: DictConfig) -> dict:
              "means over seeds of the test scores as written (calibrated where the recipe calibrates); d̄ from each "
              "seed's vessel map at its SPEC §12 threshold (chosen on the test map, quirk 18), averaged.",
              "Calibration and early stopping use the training domain's validation split only."]
+    if left_out:
+        notes.append(partial_note(left_out, c.get("partial_reason")))
     save_text(out / "recipe_ablation.md", recipe_ablation_markdown(table, c["profile"], notes))
     save_figure(reliability_figure(panels, f"Reliability of the test scores ({c['profile']} profile)"),
                 out / "reliability")
     save_figure(uncertainty_figure(ens_maps, curves, f"Seed ensembles ({c['profile']} profile): threshold "
                                    f"{c['threshold']:g} on the mean; unsure = mean ± 1 std crosses it"),
                 out / "uncertainty_maps")
-    save_json(out / "recipe_report.json", {"profile": c["profile"], "rows": rows, "ensembles": summary})
+    save_json(out / "recipe_report.json", {"profile": c["profile"], "rows": rows, "ensembles": summary,
+                                           "partial": bool(c.get("partial")), "left_out": left_out,
+                                           "partial_reason": c.get("partial_reason")})
     if c.get("tracking"):
         _track(c, rows, out)
-    return {"table": rows, "uncertainty": unc_rows, "ensembles": summary}
+    return {"table": rows, "uncertainty": unc_rows, "ensembles": summary, "left_out": left_out}
+
+
+def partial_note(left_out: list[dict], reason: str | None) -> str:
+    """One line naming the rows a partial table leaves out (and why, where the caller said)."""
+    names = "; ".join(f"{r['config']} {r['recipe']}"
+                      f"{'' if r['switch_off'] == FULL else ' minus ' + r['switch_off']} (seeds {r['missing_seeds']})"
+                      for r in left_out)
+    return (f"Partial table: {len(left_out)} row(s) left out because their runs are missing: {names}."
+            + (f" Why: {reason}" if reason else ""))
 
 
 def _track(c: dict, rows: list[dict], out: Path) -> None:

@@ -31,7 +31,21 @@ def aim_checks(df: pd.DataFrame) -> list[tuple[str, str, float, str, float, floa
     return out
 
 
-def recipe_ablation_section(df: pd.DataFrame) -> Section:
+def partial_text(report: dict | None) -> str:
+    """The page's note on a partial table (recipe_report partial=true): which rows are left out, and why."""
+    left = (report or {}).get("left_out") or []
+    if not left:
+        return ""
+    items = "\n".join(f"* {title(r['config'])}, {r['recipe']}, switch off `{r['switch_off']}`: runs of seeds "
+                      f"{', '.join(map(str, r['missing_seeds']))} missing" for r in left)
+    why = report.get("partial_reason")
+    return (f"**Partial table**: {len(left)} row(s) of the planned ablation are left out because their runs do not "
+            "exist (the report's `partial=true`; a row is all its seeds or absent, never a mean of fewer)."
+            + (f" Why: {why}" if why else "") + "\n\n" + items + "\n\n")
+
+
+def recipe_ablation_section(df: pd.DataFrame, report: dict | None = None) -> Section:
+    """The ablation table; `report` (recipe_report.json) names the rows a partial table leaves out."""
     rows = [[title(r["config"]), r["recipe"], r["switch_off"], int(r["seeds"]),
              f"{num(r['auroc_mean'])} ± {num(r['auroc_std'])}", f"{num(r['ap_mean'])} ± {num(r['ap_std'])}",
              f"{100 * r['pos_share_05']:.1f} %", num(r["ece"]), num(r["d_bar_mm"], 2)] for _, r in df.iterrows()]
@@ -39,7 +53,7 @@ def recipe_ablation_section(df: pd.DataFrame) -> Section:
     body = ("Mean ± sample std over seeds of the recipe runs (`results/recipe/`). `switch_off` names the robust "
             "recipe's switch turned back to the reference value (`none`: the full recipe). Positive share at 0.5 "
             "and ECE are computed on the written test scores (calibrated where the recipe calibrates, on the "
-            "training domain's validation split); d̄ from each seed's vessel map.\n\n"
+            "training domain's validation split); d̄ from each seed's vessel map.\n\n" + partial_text(report)
             + markdown(["Config", "Recipe", "Switch off", "Seeds", "AUROC", "AP", "Positive at 0.5", "ECE", "d̄ (mm)"],
                        rows))
     return Section("recipe_ablation", TITLES["recipe_ablation"], body, bullets, gaps, set(df["config"]))

@@ -153,7 +153,8 @@ def sections(root: Path, k: float = 2.0) -> dict[str, Section | None]:
         "table4_maps": lambda: training.table4_maps_section(t["table4_maps"], t["maps_photo"],
                                                     read_json(root / "maps" / "silicone_pose_check.json")),
         "twin_ablation": lambda: training.twin_ablation_section(t["twin_ablation"], k),
-        "recipe_ablation": lambda: recipe_ablation_section(t["recipe_ablation"]),
+        "recipe_ablation": lambda: recipe_ablation_section(t["recipe_ablation"],
+                                                           read_json(root / "recipe" / "report" / "recipe_report.json")),
         "twin_selection": lambda: twin_selection_section(t["twin_selection"], t["loop_slides"]),
     }
     return {key: build[key]() if t[key] is not None else None for key in ORDER}
