@@ -23,19 +23,10 @@ from palpation.twin.integrate import (advance_frame, check_nodes, check_tets, in
                                       set_control_velocity, snap_fixed_nodes)
 from palpation.twin.mesh import SensorMesh, build_vessel_points, morton_order, projected_node_area, shell_weights
 from palpation.twin.resident import ResidentLayout, launch_resident
-from palpation.twin.warp_runtime import init_warp
+from palpation.twin.warp_runtime import resolve_device
 from palpation.twin.parameters import CONTACT_KEYS, ENV_KEYS, LAYERED_KEYS, by_env_key, per_env_keys
 
 log = logging.getLogger(__name__)
-
-
-def resolve_device(name: str):
-    """`cuda` when present, else the CPU (the configs say cuda for the paper profile)."""
-    init_warp()
-    if str(name).startswith("cuda") and not wp.is_cuda_available():
-        log.warning("device %r requested but CUDA is not available: running on the CPU", name)
-        name = "cpu"
-    return wp.get_device(name)
 
 
 class BatchedTwin:

@@ -8,11 +8,14 @@ is started here with stderr captured at the file-descriptor level; every other l
 from __future__ import annotations
 
 import functools
+import logging
 import os
 import sys
 import tempfile
 
 import warp as wp
+
+log = logging.getLogger(__name__)
 
 CPU_ONLY_WARNING = b"Could not find or load the NVIDIA CUDA driver"
 
@@ -33,3 +36,12 @@ def init_warp() -> None:
         for line in captured.read().splitlines(keepends=True):
             if CPU_ONLY_WARNING not in line:
                 os.write(2, line)
+
+
+def resolve_device(name: str):
+    """`cuda` when present, else the CPU (the configs say cuda for the paper profile)."""
+    init_warp()
+    if str(name).startswith("cuda") and not wp.is_cuda_available():
+        log.warning("device %r requested but CUDA is not available: running on the CPU", name)
+        name = "cpu"
+    return wp.get_device(name)
