@@ -55,10 +55,6 @@ def null_problem(p, searched: list[str], trust: Mapping, warm_residual: np.ndarr
     return q, [dict(p.params), *gauss_newton(p, warm_residual, refit, steps, limits)]
 
 
-def fit_residual(p) -> np.ndarray:
-    return np.stack([p.markers[i] - t.markers for i, t in enumerate(p.targets) if t.fit])
-
-
 def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_crit: float) -> dict[str, dict]:
     """The final refit: Levenberg-Marquardt (loop.polish) on every problem's searched parameters from its
     current twin and p.starts (the last kept try's other distinct best trials), all problems in one batch
