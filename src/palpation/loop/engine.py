@@ -23,6 +23,7 @@ import numpy as np
 
 from palpation.calibration.objective import marker_mae_px
 from palpation.loop.attribution import Signature, attribute, fit_subset, joint_candidates
+from palpation.loop.compete import Winner, enter
 from palpation.loop.config import LoopConfig
 from palpation.loop.effects import EFFECTS, PARAMS, Dof, bounds, clip, move
 from palpation.loop.gate import decide, heldout_z
@@ -64,6 +65,7 @@ class Problem:
     final: dict | None = None  # loop.unexplained.final_check of the final twin
     reference_attribution: dict | None = None  # real mode: attribution at the starting twin (loop.real)
     starts: list[dict] = field(default_factory=list)  # the last kept try's best distinct trials (final refit)
+    noise_px: float | None = None  # detector noise per coordinate (loop.compete: a residual at the noise level)
 
     def fit_targets(self) -> list[Target]:
         return [t for t in self.targets if t.fit]
@@ -263,6 +265,7 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                 p.rounds.append(_record(k, p, None, att, before[p.name], None, accepted=False))
                 log.info("loop '%s' round %d: no effect explains the residual (BIC); stop", p.name, k)
         nulls: dict[str, tuple] = {}  # per problem: the null try's (summary, markers, fit), or None if it diverged
+        winners: dict[str, Winner] = {}  # per problem: the round's best set so far (loop.compete)
         for attempt in range(max((len(q) for q in queue.values()), default=0)):
             trying = [p for p in active if not p.done and len(queue[p.name]) > attempt]
             if not trying:
@@ -321,18 +324,22 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                         why = f"{why}; but not beyond re-fitting alone (null try: {why0})"
                     ok = ok and ok0
                     after["gate"]["why"] = why
-                p.rounds.append(_record(k, p, item, att, before[p.name], after, ok))
+                rec = _record(k, p, item, att, before[p.name], after, ok)
+                rec["passed"] = ok  # the gate's own verdict; `accepted`: kept after the round's competition
+                p.rounds.append(rec)
+                if ok:
+                    ok = enter(cfg, p, queue, attempt, winners, item, rec, a, fits[p.name]["starts"])
                 log.info("loop '%s' round %d try %d: %s explains %.1f %% of the residual; MAE fit %.2f -> %.2f "
                          "px; %s: %s", p.name, k, attempt + 1, "+".join(item["effects"]), 100 * item["share"],
-                         b["fit"], a["fit"], why, "kept" if ok else "rejected")
-                if ok:
-                    for e in item["effects"]:
-                        p.effects.append(e)
-                        p.candidates.remove(e)
-                    p.starts = fits[p.name]["starts"]  # the final refit's other starts (loop.refit.converge)
-                    queue[p.name] = []  # this round is done
-                else:  # the gate refused: restore the previous twin
-                    p.params, p.markers, p.searched = dict(b_params), b_markers, list(b_searched)
+                         b["fit"], a["fit"], rec["after"]["gate"]["why"], "kept" if ok else "rejected")
+                # the next try starts from the round's twin; the winner is applied when the round ends
+                p.params, p.markers, p.searched = dict(b_params), b_markers, list(b_searched)
+        for name, w in winners.items():
+            p = next(q for q in active if q.name == name)
+            p.params, p.markers, p.searched, p.starts = dict(w.params), w.markers, list(w.searched), w.starts
+            for e in w.effects:
+                p.effects.append(e)
+                p.candidates.remove(e)
         for p in active:
             if not p.done and not any(r["round"] == k and r["accepted"] for r in p.rounds):
                 p.done = True  # every try of this round was rejected

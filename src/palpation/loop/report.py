@@ -256,9 +256,10 @@ def selftest_markdown(rows: list[dict], table: Mapping[str, Mapping[str, int]], 
          f"{summ['out_of_list_runs']} (aim >= 80 %)",
          f"* in-list runs reported `unexplained`: **{summ['in_list_unexplained']}** (aim 0)",
          f"* gate over {summ['gate_tries']} tries: false accept {pct(summ['gate_false_accept'])} (an effect set not "
-         f"all injected kept), false reject {pct(summ['gate_false_reject'])} (an injected subset refused); refused "
+         f"all injected passed), false reject {pct(summ['gate_false_reject'])} (an injected subset refused); refused "
          f"because re-fitting alone did as well (null try): {summ.get('null_refused_wrong', 0)} wrong, "
-         f"{summ.get('null_refused_right', 0)} injected", "",
+         f"{summ.get('null_refused_right', 0)} injected; passed the gate but lost the round's competition "
+         f"(loop.compete): {summ.get('replaced', 0)}", "",
          "## Confusion (rows named, columns injected; a run counts in every pair of its sets)", "",
          "| named \\ injected | " + " | ".join(cols) + " |", "|---" * (len(cols) + 1) + "|"]
     for n, counts in table.items():
