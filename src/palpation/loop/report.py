@@ -122,6 +122,11 @@ def verdict_lines(p: Problem, meta: Mapping) -> list[str]:
                  f"keeps {'+'.join(ref['best_subset']) or 'nothing'} ({ref['best_subset_share']:.0%}), on the round-0 "
                  f"twin {'+'.join(first['best_subset']) or 'nothing'} ({first['best_subset_share']:.0%})"
                  + ("." if same else ": they differ, so the round-0 stiffness absorbed part of a signature."))
+    ties = [f"{r['effect']} ~ {' ~ '.join(r['indistinguishable'])} (round {r['round']})" for r in kept
+            if r.get("indistinguishable")]
+    if ties:
+        L.append("* Indistinguishable on these states (neither passes the gate against the other; the smaller set "
+                 "is kept, loop.compete): " + "; ".join(ties) + ".")
     nulled = [r for r in p.rounds if "not beyond re-fitting" in ((r.get("after") or {}).get("gate") or {}).get("why", "")]
     if nulled:
         L.append("* Refused because re-fitting the current parameters alone (the null try) did as well: "
