@@ -187,6 +187,9 @@ def run_selftest(cfg: LoopConfig, simulate, base: Mapping[str, float], template:
                      "tries": [{"round": r["round"], "effects": r.get("effects", []), "accepted": r["accepted"],
                                 "passed": r.get("passed", r["accepted"]),
                                 "indistinguishable": r.get("indistinguishable", []),
+                                "fit_px": (r.get("after") or {}).get("fit"),
+                                "heldout_px": (r.get("after") or {}).get("heldout"),
+                                "why": ((r.get("after") or {}).get("gate") or {}).get("why", ""),
                                 "null_refused": "not beyond re-fitting" in ((r.get("after") or {}).get("gate") or {})
                                 .get("why", "")} for r in p.rounds],
                      "injected": {k: inj.params[k] for e in inj.effects for k in EFFECTS[e].params},
