@@ -75,6 +75,9 @@ class LoopConfig:
     # a set that passes the gate does not end the round: smaller sets, and larger ones while the residual stays
     # above the noise, may replace it (loop.compete); false = the first set that passes is kept
     compete: bool = True
+    # every finish of a search that has the camera also starts from the camera's best other basin: a grid of
+    # principal points, f and rotation in closed form (loop.basins); false = the search's best trials only
+    camera_basins: bool = True
     final_refit_iters: int = 3
     # every try (the null try too) is finished by a bounded Levenberg-Marquardt solver after its search
     # (loop.polish): polish_iters iterations from its polish_starts best distinct trials (0 = off), so tries

@@ -23,6 +23,7 @@ import numpy as np
 
 from palpation.calibration.objective import marker_mae_px
 from palpation.loop.attribution import Signature, attribute, fit_subset, joint_candidates
+from palpation.loop.basins import camera_starts, nominal_steps
 from palpation.loop.compete import Winner, enter
 from palpation.loop.config import LoopConfig
 from palpation.loop.effects import EFFECTS, PARAMS, Dof, bounds, clip, move
@@ -290,7 +291,9 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                                progress=progress)
             for p in [*trying, *extra]:
                 p.params.update(fits[p.name]["params"])
-            finish(cfg, [*trying, *extra], fits, simulate)  # every try (null too) at its local optimum
+            # every try (null too) at its local optimum; a try that adds the camera also from its best other basin
+            finish(cfg, [*trying, *extra], fits, simulate,
+                   {p.name for p in trying if "camera" in queue[p.name][attempt]["effects"]})
             diverged = evaluate([*trying, *extra], simulate, strict=False)
             for q in extra:  # a diverged null try leaves the previous twin as the only reference
                 nulls[q.name[:-len(NULL)]] = None if q.name in diverged else (q.summary(), q.markers, fits[q.name])
@@ -349,16 +352,21 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
     rounds.close()
 
 
-def finish(cfg: LoopConfig, problems: list[Problem], fits: dict[str, dict], simulate) -> None:
-    """The local least-squares finish of each problem's search (loop.polish), from its best distinct trials;
-    fits[name] gains `polish` (fitted MAE before/after), `params_final` and `starts` (the next-best distinct
-    trials the final refit also starts from) in place of the search's ranked trials."""
+def finish(cfg: LoopConfig, problems: list[Problem], fits: dict[str, dict], simulate, basins=()) -> None:
+    """The local least-squares finish of each problem's search (loop.polish), from its best distinct trials
+    (and, for the problems named in `basins`, the camera's best other basin: loop.basins); fits[name] gains
+    `polish` (fitted MAE before/after), `params_final` and `starts` (the next-best distinct trials the final
+    refit also starts from) in place of the search's ranked trials."""
     limits = {p.name: {**cfg.search.bounds, **p.trust} for p in problems}
     starts = {p.name: distinct_starts(fits[p.name].pop("ranked"), p.searched, limits[p.name],
                                       max(cfg.polish_starts, cfg.final_refit_starts)) for p in problems}
+    grid = camera_starts([p for p in problems if p.name in basins], simulate, limits, nominal_steps(cfg.steps)) \
+        if cfg.camera_basins else {}
+    for name, s in grid.items():  # the camera's best other basin as one more start (loop.basins)
+        starts[name] = [*starts[name][:cfg.polish_starts], s, *starts[name][cfg.polish_starts:]]
     if cfg.polish_iters > 0:
-        done = polish(problems, {n: s[:cfg.polish_starts] for n, s in starts.items()}, simulate, limits,
-                      cfg.polish_iters)
+        done = polish(problems, {n: s[:cfg.polish_starts + (n in grid)] for n, s in starts.items()}, simulate,
+                      limits, cfg.polish_iters)
         log.info("local finish of %d tries: %d twin jobs; fitted MAE %.3f -> %.3f px (mean)", len(problems),
                  next(iter(done.values()))["jobs_all"] if done else 0,
                  np.nanmean([d.get("fit_start", np.nan) for d in done.values()]),
