@@ -81,9 +81,14 @@ use rule simulate_dataset as judge_dataset with:
         "results/logs/judge/dataset_slide_loop_{fold}.log",
 
 
+def _judge_first(wildcards):
+    """The candidate's first configuration (A-to-B): the one a seeds-together job trains."""
+    return SimpleNamespace(exp=JUDGE_EXPERIMENTS[0], twin=wildcards.twin)
+
+
 use rule train as judge_train with:
     input:
-        unpack(lambda wildcards: train_inputs(wildcards, judge_sim(wildcards))),
+        unpack(lambda wildcards: train_inputs(wildcards, judge_sim(wildcards), JUDGE_RECIPE)),
     output:
         metrics=f"{JUDGE_RUN}/metrics.json",
         scores=f"{JUDGE_RUN}/scores.npz",
@@ -98,31 +103,51 @@ use rule train as judge_train with:
         "results/logs/judge/train_{twin}_{exp}_L{clip_len}_seed{seed}.log",
     params:
         rule="judge_train",
-        overrides=lambda wildcards: train_overrides(wildcards, judge_sim(wildcards)),
+        overrides=lambda wildcards: train_overrides(wildcards, judge_sim(wildcards), JUDGE_RECIPE),
 
 
 # train.seeds_together (the paper profile): a candidate's judge.seeds in one process, as rule train_seeds does
-# for the main sweep (stacked models, issue 17: five seeds in ~0.46x the time of five runs on the H100).
+# for the main sweep (stacked models, issue 17: five seeds in ~0.46x the time of five runs on the H100). A-to-B
+# and A-to-C train the same models on the candidate's Sim set, so one job trains them once and scores both test
+# sets (app key also_test, as the recipe ablation does): every candidate alike.
 if TRAIN["seeds_together"] and JUDGE["seeds"]:
 
-    use rule train_seeds as judge_train_seeds with:
+    rule judge_train_seeds:
         input:
-            unpack(lambda wildcards: train_inputs(wildcards, judge_sim(wildcards))),
+            unpack(lambda wildcards: train_inputs(_judge_first(wildcards), judge_sim(wildcards), JUDGE_RECIPE)),
         output:
-            metrics=expand(f"{JUDGE_RUN}/metrics.json", seed=JUDGE["seeds"], allow_missing=True),
-            scores=expand(f"{JUDGE_RUN}/scores.npz", seed=JUDGE["seeds"], allow_missing=True),
-            pr=expand(f"{JUDGE_RUN}/pr.npz", seed=JUDGE["seeds"], allow_missing=True),
-            checkpoint=expand(f"{JUDGE_RUN}/checkpoint.pt", seed=JUDGE["seeds"], allow_missing=True),
+            **{key: [str(run_dir(f"{JUDGE_DIR}/train/{{twin}}", e, "{clip_len}", s) / name)
+                     for e in JUDGE_EXPERIMENTS for s in JUDGE["seeds"]]
+               for key, name in (("metrics", "metrics.json"), ("scores", "scores.npz"), ("pr", "pr.npz"),
+                                 ("checkpoint", "checkpoint.pt"))},
         wildcard_constraints:
             twin="|".join(JUDGE_TRAINED),
-            exp="|".join(JUDGE_EXPERIMENTS),
             clip_len=str(TRAIN["clip_len"]),
         log:
-            "results/logs/judge/train_{twin}_{exp}_L{clip_len}_seeds.log",
+            "results/logs/judge/train_{twin}_L{clip_len}_seeds.log",
         params:
             rule="judge_train_seeds",
-            overrides=lambda wildcards: train_overrides(wildcards, judge_sim(wildcards)),
+            py=PY,
+            exp=JUDGE_EXPERIMENTS[0],
+            overrides=lambda wildcards: (
+                train_overrides(_judge_first(wildcards), judge_sim(wildcards), JUDGE_RECIPE)
+                + " 'also_test=[" + ",".join(f"{e}:{EXPERIMENTS[e].test_on}" for e in JUDGE_EXPERIMENTS[1:]) + "]'"),
             seeds=yaml_list(JUDGE["seeds"]),
+            # the app writes seed s of A-to-B to <run dir>/seed<s>/ (run dir = its L<clip_len> folder), A-to-C beside it
+            hydra=lambda wildcards, output: (f"hydra.run.dir={Path(output.metrics[0]).parents[1]}"
+                                             " hydra.output_subdir=.hydra/seeds"),
+            profile=PROFILE,
+            device=config["device"],
+        threads: TRAIN.get("threads", 1)
+        resources:
+            gpu=GPU,
+        conda:
+            CONDA_ENV
+        shell:
+            ("OMP_NUM_THREADS={threads} " if "threads" in TRAIN else "")
+            + "PALPATION_PROFILE={params.profile} SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.train"
+            " experiment={params.exp} 'seeds={params.seeds}' clip_len={wildcards.clip_len}"
+            " device={params.device} {params.overrides} {params.hydra} > {log} 2>&1"
 
     ruleorder: judge_train_seeds > judge_train
 
