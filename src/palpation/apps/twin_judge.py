@@ -51,7 +51,9 @@ def slides(cfg: DictConfig) -> dict:
     sub, _ = select(sset, scored, loop["size"]["frames"])
     mesh = SensorMesh.load(cfg.mesh) if cfg.mesh else cached_sensor_mesh(twin.mesh.resolution)
     binding = bind_markers(mesh.nodes, mesh.dome_nodes, sset.rest)
-    markers, failed = replay(mesh, twin, binding, sub, make_scene(sset), [schedule_of(twin)], device=twin.device)
+    lead_in = float(loop.get("replay", {}).get("lead_in_mm", 0.0))  # as the slide loop replayed (0: older json)
+    markers, failed = replay(mesh, twin, binding, sub, make_scene(sset), [schedule_of(twin)], device=twin.device,
+                             lead_in_mm=lead_in)
     out = {"twin": cfg.name, "fold": cfg.fold, "trials": scored, "fitted_trials": fitted,
            "frames": loop["size"]["frames"], **score(markers[0], failed[0], sub)}
     out["heldout_slide_mae_px"] = float(np.mean(out["mae_px"]))

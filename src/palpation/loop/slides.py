@@ -73,12 +73,23 @@ def scene_config(cfg: TwinConfig, scene: Scene) -> TwinConfig:
 
 
 def plan_replay(pose_mm: np.ndarray, scene: Scene, tip_B_m: np.ndarray, dz_mm: float = 0.0,
-                frame_dt_s: float = FRAME_DT_S) -> tuple[Trajectory, np.ndarray]:
-    """The pose schedule through one trial's measured poses (F, 3) and the frame that reaches each."""
+                frame_dt_s: float = FRAME_DT_S, lead_in_mm: float = 0.0) -> tuple[Trajectory, np.ndarray]:
+    """The pose schedule through one trial's measured poses (F, 3) and the frame that reaches each.
+    `lead_in_mm` > 0: press that far back along the first step and slide in at depth, so the first measured
+    frame is already in steady sliding, as the real one is (the recordings are trimmed mid-sweep, SPEC §13.4)."""
     pose = np.asarray(pose_mm, np.float64)
     xy = scene.to_twin(pose[:, :2])
     z = PHANTOM_TOP_M - (pose[:, 2] + dz_mm) * 1e-3
-    table = np.concatenate([[[*xy[0], APPROACH_Z_M[0]], [*xy[0], APPROACH_Z_M[1]]], np.column_stack([xy, z])])
+    start = [*xy[0]]
+    lead = []
+    if lead_in_mm > 0:
+        step = xy[1] - xy[0] if len(xy) > 1 else np.zeros(2)
+        if not np.linalg.norm(step) > 0:
+            raise ValueError("replay: lead_in_mm needs the first two measured poses apart (the slide's direction)")
+        start = xy[0] - step / np.linalg.norm(step) * lead_in_mm * 1e-3
+        lead = [[*start, z[0]]]
+    table = np.concatenate([[[*start, APPROACH_Z_M[0]], [*start, APPROACH_Z_M[1]]], *([lead] if lead else []),
+                            np.column_stack([xy, z])])
     R = BASE_ROTATION.as_matrix()
     offset = R @ np.asarray(tip_B_m, np.float64)
     tip = table[0].copy()
@@ -102,7 +113,7 @@ def plan_replay(pose_mm: np.ndarray, scene: Scene, tip_B_m: np.ndarray, dz_mm: f
         poses.append(pose_matrix(BASE_ROTATION, tip - offset))
     traj = Trajectory(kind="slide", T_BA0=pose_matrix(BASE_ROTATION, table[0] - offset), T_BA=np.stack(poses),
                       record_from=0, frame_dt_s=frame_dt_s)
-    return traj, np.array(reached_at[2:])  # the measured frames (after the two approach waypoints)
+    return traj, np.array(reached_at[2 + len(lead):])  # the measured frames (after approach and lead-in)
 
 
 def split_params(params: dict) -> tuple[dict, dict]:
@@ -117,16 +128,19 @@ def split_params(params: dict) -> tuple[dict, dict]:
 
 
 def replay(mesh: SensorMesh, cfg: TwinConfig, binding: MarkerBinding, sset: SequenceSet, scene: Scene,
-           candidates: list[dict], device: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+           candidates: list[dict], device: str | None = None,
+           lead_in_mm: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Every candidate on every trial of `sset`, one batch: markers (C, T, F, 127, 2) px and failed (C, T).
-    `cfg` is the base twin; the scene (compliant phantom, the vessels near these slides) is added here."""
+    `cfg` is the base twin; the scene (compliant phantom, the vessels near these slides) is added here;
+    `lead_in_mm`: plan_replay's slide-in before the first measured pose."""
     tip_B = tip_node_B(mesh)
     reqs, trajs, samples, anchors = [], [], [], []
     for params in candidates:
         env, sched = split_params(params)
         for t in range(sset.n_trials):
             reqs.append(EnvRequest("slide", vessel=False, name=f"{sset.trials[t]['name']}", **env))
-            traj, frames = plan_replay(sset.pose_mm[t], scene, tip_B, sched.get("mount_dz_mm", 0.0), cfg.frame_dt)
+            traj, frames = plan_replay(sset.pose_mm[t], scene, tip_B, sched.get("mount_dz_mm", 0.0), cfg.frame_dt,
+                                       lead_in_mm)
             trajs.append(traj)
             samples.append(frames)
             anchors.append(sched.get("marker_anchor", 0.0))
