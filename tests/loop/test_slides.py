@@ -157,3 +157,21 @@ def test_lead_in_slides_to_the_first_pose_at_depth():
     assert (plain.T_BA[:frames0[0]][:, :3, 3][:, 2] < PHANTOM_TOP_M - 1e-3).sum() < pressed.sum()
     with pytest.raises(ValueError, match="lead_in_mm"):
         plan_replay(s.pose_mm[0, :1], scene, np.zeros(3), lead_in_mm=6.0)
+
+
+def test_phantom_tilt_deepens_the_press_along_the_slope_and_stays_out_of_the_sim_twin():
+    from palpation.loop.slide_twins import fold_params, scene_params, twin_overrides
+
+    s = toy_set(1, 3, step_mm=4.0)
+    scene = make_scene(s)
+    flat, f0 = plan_replay(s.pose_mm[0], scene, np.zeros(3))
+    tilted, f1 = plan_replay(s.pose_mm[0], scene, np.zeros(3), tilt=(0.0, 0.02))
+    z0, z1 = flat.T_BA[f0][:, 2, 3], tilted.T_BA[f1][:, 2, 3]
+    y_mm = s.pose_mm[0, :, 1] - scene.origin_mm[1]
+    np.testing.assert_allclose(z0 - z1, 0.02 * y_mm * 1e-3, atol=1e-3)  # deeper (lower z) towards +y
+    assert (z0 - z1)[0] > (z0 - z1)[-1]  # toy slides run -y: the press gets shallower along them
+    with pytest.raises(ValueError, match="leaves its physical bounds"):
+        SlideLoopSettings(effects={"t": {"tilt_y": [0.5]}}).validate()
+    loop = {"params": {"odd": [{"k_f": 1e7}, {"k_f": 1e7, "mu": 0.8, "tilt_y": 0.01}], "even": [{"k_f": 1e7}]}}
+    assert fold_params(loop, "odd") == {"k_f": 1e7, "mu": 0.8} and scene_params(loop, "odd") == {"tilt_y": 0.01}
+    assert "tilt_y" not in str(twin_overrides(fold_params(loop, "odd"))) and scene_params(loop, "even") == {}

@@ -22,7 +22,7 @@ import numpy as np
 import optuna
 
 from palpation.loop.folds import other, trial_folds
-from palpation.loop.slides import SCHEDULE_KEYS, frame_mae, frame_mae_abs, slide_modes, vessel_ratio
+from palpation.loop.slides import SCENE_PARAMETERS, SCHEDULE_KEYS, frame_mae, frame_mae_abs, slide_modes, vessel_ratio
 from palpation.measured_sequences import SequenceSet
 from palpation.twin.parameters import PARAMETERS
 
@@ -32,6 +32,11 @@ COLUMNS = ("fold", "round", "effect_added", "mae_fit_px", "mae_heldout_px", "ves
            "mae_abs_heldout_px")
 Evaluate = Callable[[SequenceSet, list[dict]], tuple[np.ndarray, np.ndarray]]  # -> markers (C,T,F,127,2), failed (C,T)
 SAMPLERS = ("tpe", "grid")
+
+
+def bounds_of(name: str):
+    """The search range of a slide-loop parameter: the twin's registry, else the real scene's (loop.slides)."""
+    return PARAMETERS.get(name) or SCENE_PARAMETERS[name]
 
 
 @dataclass
@@ -62,10 +67,11 @@ class SlideLoopSettings:
                 raise ValueError(f"{where}: effects.{effect} needs value lists of one common, non-zero length "
                                  f"(candidate i takes value i of each), got {({k: len(v) for k, v in grid.items()})}")
             for name, values in grid.items():
-                p = PARAMETERS[name]
+                p = bounds_of(name)
                 if not p.low <= min(values) <= max(values) <= p.high:
                     raise ValueError(f"{where}: effects.{effect}.{name} = {list(values)} leaves its physical bounds "
-                                     f"[{p.low:g}, {p.high:g}] {p.unit} ({p.why}; palpation/twin/parameters.py)")
+                                     f"[{p.low:g}, {p.high:g}] {p.unit} ({p.why}; palpation/twin/parameters.py, "
+                                     "loop/slides.py SCENE_PARAMETERS)")
         if self.max_rounds < 0 or self.min_improvement_px < 0:
             raise ValueError(f"{where}: need max_rounds >= 0 and min_improvement_px >= 0")
         s = self.search
@@ -92,7 +98,7 @@ def at_bounds(params: dict, rel: float = 0.02) -> list[str]:
     symptom that the fit wants more than the physical range allows (docs/loop.md "Slides")."""
     out = []
     for name, value in params.items():
-        p = PARAMETERS.get(name)
+        p = PARAMETERS.get(name) or SCENE_PARAMETERS.get(name)
         if p is None or p.high <= p.low:
             continue
         lo, hi, x = (np.log(p.low), np.log(p.high), np.log(value)) if p.log and p.low > 0 and value > 0 else \
@@ -124,7 +130,7 @@ def _round_tpe(score, current: dict, remaining: list[str], settings: SlideLoopSe
         for effect in remaining:
             for _ in range(s.per_batch):
                 trial = studies[effect].ask()
-                c = {n: trial.suggest_float(n, PARAMETERS[n].low, PARAMETERS[n].high, log=PARAMETERS[n].log)
+                c = {n: trial.suggest_float(n, bounds_of(n).low, bounds_of(n).high, log=bounds_of(n).log)
                      for n in settings.effects[effect]}
                 asked.append((effect, trial))
                 cands.append({**current, **c})
