@@ -143,6 +143,7 @@ def test_judge_dag_when_turned_on(tmp_path):
     cmds = [line for line in listing.splitlines() if "SNAKEMAKE_RULE=judge_train_seeds" in line]
     assert len(cmds) == 4 and all("recipe=robust" in c and "also_test=[A-to-C:meat]" in c for c in cmds)
     assert any("results/judge/train/photo_loop" in c for c in cmds)
+    assert stats["meat_set"] == 1  # A-to-C's test set: an input of the jobs that score it
 
 
 def test_paper_recipe_ablation_plan(tmp_path):

@@ -86,6 +86,16 @@ def _judge_first(wildcards):
     return SimpleNamespace(exp=JUDGE_EXPERIMENTS[0], twin=wildcards.twin)
 
 
+def _judge_seeds_inputs(wildcards):
+    """Every judged configuration's datasets and conf/ files: one job trains A-to-B and scores A-to-C (Meat)."""
+    out = {}
+    for exp in JUDGE_EXPERIMENTS:
+        one = train_inputs(SimpleNamespace(exp=exp, twin=wildcards.twin), judge_sim(wildcards), JUDGE_RECIPE)
+        conf = sorted(set(out.get("conf", [])) | set(one.pop("conf")))
+        out.update(one, conf=conf)
+    return out
+
+
 use rule train as judge_train with:
     input:
         unpack(lambda wildcards: train_inputs(wildcards, judge_sim(wildcards), JUDGE_RECIPE)),
@@ -114,7 +124,7 @@ if TRAIN["seeds_together"] and JUDGE["seeds"]:
 
     rule judge_train_seeds:
         input:
-            unpack(lambda wildcards: train_inputs(_judge_first(wildcards), judge_sim(wildcards), JUDGE_RECIPE)),
+            unpack(_judge_seeds_inputs),
         output:
             **{key: [str(run_dir(f"{JUDGE_DIR}/train/{{twin}}", e, "{clip_len}", s) / name)
                      for e in JUDGE_EXPERIMENTS for s in JUDGE["seeds"]]
@@ -129,9 +139,11 @@ if TRAIN["seeds_together"] and JUDGE["seeds"]:
             rule="judge_train_seeds",
             py=PY,
             exp=JUDGE_EXPERIMENTS[0],
-            overrides=lambda wildcards: (
-                train_overrides(_judge_first(wildcards), judge_sim(wildcards), JUDGE_RECIPE)
-                + " 'also_test=[" + ",".join(f"{e}:{EXPERIMENTS[e].test_on}" for e in JUDGE_EXPERIMENTS[1:]) + "]'"),
+            overrides=lambda wildcards: " ".join(
+                [train_overrides(_judge_first(wildcards), judge_sim(wildcards), JUDGE_RECIPE)]
+                + [f"data.{k}={v}" for k, v in _judge_seeds_inputs(wildcards).items()
+                   if k not in ("conf", "sim", EXPERIMENTS[JUDGE_EXPERIMENTS[0]].test_on)]  # the other test sets
+                + ["'also_test=[" + ",".join(f"{e}:{EXPERIMENTS[e].test_on}" for e in JUDGE_EXPERIMENTS[1:]) + "]'"]),
             seeds=yaml_list(JUDGE["seeds"]),
             # the app writes seed s of A-to-B to <run dir>/seed<s>/ (run dir = its L<clip_len> folder), A-to-C beside it
             hydra=lambda wildcards, output: (f"hydra.run.dir={Path(output.metrics[0]).parents[1]}"
