@@ -7,7 +7,8 @@ effect's parameters on the fitted trials and keeps the best effect if it lowers 
 * `tpe` (default): a continuous search within each parameter's physical bounds (palpation.twin.parameters,
   log-scaled where the registry says), one seeded Optuna TPE study per effect and round; `search.batches`
   sequential twin batches, each holding `search.per_batch` asks of every remaining effect (all effects of a
-  batch in one twin call), the first batch the sampler's random start;
+  batch in one twin call); the first batch tries the effect's first `per_batch` listed values (then random
+  starts if it lists fewer), the later ones are TPE's;
 * `grid`: the effects' value lists (value i of every list of one effect is candidate i), one twin batch.
 Which effect and value are chosen uses the fitted trials only; the held-out trials and the labels only score.
 """
@@ -124,6 +125,9 @@ def _round_tpe(score, current: dict, remaining: list[str], settings: SlideLoopSe
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     studies = {e: optuna.create_study(sampler=optuna.samplers.TPESampler(
         seed=seed + 7919 * i, n_startup_trials=s.per_batch, multivariate=True)) for i, e in enumerate(remaining)}
+    for effect in remaining:  # the first batch starts from the effect's listed values, the rest is the sampler's
+        for c in candidates_of(settings.effects[effect])[:s.per_batch]:
+            studies[effect].enqueue_trial(c)
     cands, owners, maes = [], [], []
     for _ in range(s.batches):
         asked = []
