@@ -182,6 +182,7 @@ rule twin_selection:
         profile=PROFILE,
         seeds=yaml_list(JUDGE["seeds"]),
         clip_len=TRAIN["clip_len"],
+        recipe=JUDGE_RECIPE,
         stem=lambda wildcards, input: input.npz[: -len(".npz")],
         runs=" ".join(f"runs.{t}={judge_runs_root(t)}" for t in JUDGE_TWINS),
         slides=" ".join(f"slides.{t}={JUDGE_DIR}/slides/{t}.json" for t in JUDGE_TWINS),
@@ -193,5 +194,6 @@ rule twin_selection:
         CONDA_ENV
     shell:
         "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.twin_judge task=table profile={params.profile}"
-        " 'seeds={params.seeds}' clip_len={params.clip_len} sequences={params.stem} {params.runs} {params.slides}"
+        " 'seeds={params.seeds}' clip_len={params.clip_len} recipe={params.recipe} sequences={params.stem}"
+        " {params.runs} {params.slides}"
         " out.csv={output.csv} out.md={output.md} out.figure={params.figure} {params.hydra} > {log} 2>&1"
