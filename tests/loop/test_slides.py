@@ -135,7 +135,7 @@ def test_continuous_search_finds_values_between_the_grid_points_and_reports_a_bo
         final = result["params"][fold][-1]
         assert abs(final["mu"] - 0.63) < 0.1 and final["E"] > 1.7e6
         last = [r for r in result["rows"] if r["fold"] == fold][-1]
-        assert [b for b in last["at_bounds"] if b.startswith("E=")] and "upper bound" in last["at_bounds"][0]
+        assert last["at_bounds"].startswith("E=") and "upper bound" in last["at_bounds"]
     again = run_slide_loop(fake_twin(truth, {"mu": 0.63, "E": 5e6})[0], s, settings, [1, 2, 3, 4])
     assert again["params"] == result["params"]  # seeded: deterministic
     assert at_bounds({"E": 2.0e6, "mu": 0.5}) == ["E=2e+06 at its upper bound [100000, 2e+06] Pa"]

@@ -148,10 +148,13 @@ def size_knobs(sizes):
 
 
 def train_overrides(wildcards, sim=TRAIN_DATA["sim"], recipe=TRAIN["recipe"]):
-    """Dataset paths and the profile's size knobs for this configuration's model, as Hydra overrides. The
-    profile's sizes belong to its train.recipe; another recipe trains at its own (conf/recipe/<name>.yaml)."""
+    """Dataset paths and the profile's size knobs for this configuration's model, as Hydra overrides. Another
+    recipe than train.recipe takes the profile's sizes for it where the recipe ablation sets them
+    (train.recipe_ablation.sizes), else train.sizes; a knob left out keeps the recipe's own value."""
     data = [f"data.{k}={v}" for k, v in train_data(wildcards, sim).items()]
-    sizes = (TRAIN["sizes"].get(EXPERIMENTS[wildcards.exp].model) or {}) if recipe == TRAIN["recipe"] else {}
+    model = EXPERIMENTS[wildcards.exp].model
+    own = (RECIPE_ABL.get("sizes") or {}).get(recipe) if recipe != TRAIN["recipe"] else None
+    sizes = (own if own is not None else TRAIN["sizes"]).get(model) or {}
     return " ".join(data + size_knobs(sizes) + [f"recipe={recipe}"])
 
 

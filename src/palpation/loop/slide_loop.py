@@ -29,8 +29,9 @@ from palpation.twin.parameters import PARAMETERS
 
 log = logging.getLogger(__name__)
 # mae_*: marker motion about each trial's median (loop.slides.frame_mae); mae_abs_heldout_px: the absolute error
+# at_bounds: the kept parameters at a physical bound ("; "-joined), a symptom (slide_loop.at_bounds)
 COLUMNS = ("fold", "round", "effect_added", "mae_fit_px", "mae_heldout_px", "vessel_ratio_sim", "vessel_ratio_real",
-           "mae_abs_heldout_px")
+           "mae_abs_heldout_px", "at_bounds")
 Evaluate = Callable[[SequenceSet, list[dict]], tuple[np.ndarray, np.ndarray]]  # -> markers (C,T,F,127,2), failed (C,T)
 SAMPLERS = ("tpe", "grid")
 
@@ -158,7 +159,7 @@ def run_fold(evaluate: Evaluate, fit: SequenceSet, held: SequenceSet, settings: 
              "mae_heldout_px": float(mae_held[0]), "vessel_ratio_sim": vessel_ratio(m_held[0], held.labels),
              "vessel_ratio_real": real_ratio, "modes_heldout": slide_modes(m_held[0], held),
              "mae_abs_heldout_px": float(frame_mae_abs(m_held[0], held).mean()),
-             "at_bounds": at_bounds({n: current[n] for n in searched})}
+             "at_bounds": "; ".join(at_bounds({n: current[n] for n in searched}))}
         log.info("fold %s round %d (%s): motion MAE fit %.3f px, held-out %.3f px (absolute %.3f px), "
                  "vessel ratio sim %.3f / real %.3f%s", fold, k, effect, r["mae_fit_px"], r["mae_heldout_px"],
                  r["mae_abs_heldout_px"], r["vessel_ratio_sim"], real_ratio,
