@@ -81,21 +81,6 @@ use rule simulate_dataset as judge_dataset with:
         "results/logs/judge/dataset_slide_loop_{fold}.log",
 
 
-def _judge_first(wildcards):
-    """The candidate's first configuration (A-to-B): the one a seeds-together job trains."""
-    return SimpleNamespace(exp=JUDGE_EXPERIMENTS[0], twin=wildcards.twin)
-
-
-def _judge_seeds_inputs(wildcards):
-    """Every judged configuration's datasets and conf/ files: one job trains A-to-B and scores A-to-C (Meat)."""
-    out = {}
-    for exp in JUDGE_EXPERIMENTS:
-        one = train_inputs(SimpleNamespace(exp=exp, twin=wildcards.twin), judge_sim(wildcards), JUDGE_RECIPE)
-        conf = sorted(set(out.get("conf", [])) | set(one.pop("conf")))
-        out.update(one, conf=conf)
-    return out
-
-
 use rule train as judge_train with:
     input:
         unpack(lambda wildcards: train_inputs(wildcards, judge_sim(wildcards), JUDGE_RECIPE)),
@@ -124,7 +109,7 @@ if TRAIN["seeds_together"] and JUDGE["seeds"]:
 
     rule judge_train_seeds:
         input:
-            unpack(_judge_seeds_inputs),
+            unpack(judge_seeds_inputs),
         output:
             **{key: [str(run_dir(f"{JUDGE_DIR}/train/{{twin}}", e, "{clip_len}", s) / name)
                      for e in JUDGE_EXPERIMENTS for s in JUDGE["seeds"]]
@@ -140,8 +125,8 @@ if TRAIN["seeds_together"] and JUDGE["seeds"]:
             py=PY,
             exp=JUDGE_EXPERIMENTS[0],
             overrides=lambda wildcards: " ".join(
-                [train_overrides(_judge_first(wildcards), judge_sim(wildcards), JUDGE_RECIPE)]
-                + [f"data.{k}={v}" for k, v in _judge_seeds_inputs(wildcards).items()
+                [train_overrides(judge_first(wildcards), judge_sim(wildcards), JUDGE_RECIPE)]
+                + [f"data.{k}={v}" for k, v in judge_seeds_inputs(wildcards).items()
                    if k not in ("conf", "sim", EXPERIMENTS[JUDGE_EXPERIMENTS[0]].test_on)]  # the other test sets
                 + ["'also_test=[" + ",".join(f"{e}:{EXPERIMENTS[e].test_on}" for e in JUDGE_EXPERIMENTS[1:]) + "]'"]),
             seeds=yaml_list(JUDGE["seeds"]),
