@@ -64,6 +64,21 @@ def test_sim_label_rule():
     assert sim_labels(markers, line, np.array([False])).tolist() == [[0, 0, 0]]
 
 
+def test_sim_labels_bit_identical_to_the_summed_squares():
+    """The fast distance (dx² + dy²) equals the original summed (..., 2) squares bit for bit, ties at the radius
+    included, so training batches and every reference output are unchanged."""
+    rng = np.random.default_rng(3)
+    markers = rng.uniform(0, 2000, (4, 5, 127, 2)).astype(np.float32)
+    line = (markers[:, :, :50] + rng.normal(0, 30, (4, 5, 50, 2))).astype(np.float32)
+    line[0, 0, 0] = markers[0, 0, 7] + np.float32([30.0, 0.0])  # exactly on the radius: not positive
+    contact = rng.random((4, 5)) < 0.8
+    d2 = ((markers[..., :, None, :].astype(np.float64) - line[..., None, :, :]) ** 2).sum(-1)
+    expected = ((d2.min(axis=-1) < 30.0 ** 2) & contact[..., None]).astype(np.int8)
+    got = sim_labels(markers, line, contact)
+    assert got.dtype == np.int8 and np.array_equal(got, expected)
+    assert 0 < expected.mean() < 1
+
+
 def test_rotation_permutation_is_consistent():
     rest = rest_layout("ideal")
     perms = rotation_permutations(rest)
