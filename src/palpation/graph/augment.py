@@ -15,7 +15,7 @@ ROTATION_CENTRE_PX = (1040.0, 584.0)
 ROTATION_STEP_DEG = 60
 N_ROTATIONS = 6
 LABEL_RADIUS_PX = 30.0
-ROTATION_MODES = ("none", "reference", "consistent")
+ROTATION_MODES = ("none", "reference", "consistent", "lattice")  # lattice: palpation.graph.clips.ClipSet.gather
 
 
 def rotate_points(points: np.ndarray, angle_deg, centre=ROTATION_CENTRE_PX) -> np.ndarray:
