@@ -74,8 +74,8 @@ if [ -n "${LOOP_FROM:-}" ] && [ ! -f results/loop/.carried ]; then
   echo "Sim set's twin: carried loop fit $(sha256sum results/loop/twin_fit/fitted.yaml | cut -c1-16)"
 fi
 snake_opts=()
-[ -n "${GPU_SLOTS:-}" ] && snake_opts+=(--resources "gpu=$GPU_SLOTS")
-[ -n "${CORES:-}" ] && snake_opts+=(--cores "$CORES")
+[ -n "${GPU_SLOTS:-}" ] && snake_opts+=("--resources=gpu=$GPU_SLOTS")  # one value: --resources takes several
+[ -n "${CORES:-}" ] && snake_opts+=("--cores=$CORES")
 pid=$(cat "$out/snakemake.pid" 2>/dev/null)
 if [ -n "$pid" ] && kill -0 "$pid" 2>/dev/null; then
   echo "re-attaching to the run still going (pid $pid)"
