@@ -7,8 +7,8 @@ This measures the candidate causes that need no training, on the Sim train and v
   * rotation: the offset a `consistent` rotation adds to a node (its rotated position minus its rest site plus the
     rotated displacement, i.e. `consistent` minus `lattice`), against the vessel's displacement signal in val clips
     (|marker - rest| of positive and of negative markers at the central frame);
-  * normalisation: each scaled feature column of val clips and of augmented training batches (consistent and
-    lattice rotation), z-scored with the robust statistics (from the training clips): mean and std per column; a
+  * normalisation: each scaled feature column of val clips and of augmented training batches (robust; with
+    lattice rotation; without jitter), z-scored with the robust statistics (from the training clips): mean and std per column; a
     val set that saw the same normalisation has mean ~0, std ~1 like the training batches;
   * labels: the positive share of training and val markers (the focal α).
 """
@@ -73,14 +73,17 @@ def diagnose(sim: str, n_clips: int = 256, seed: int = 0, rest_name: str = "temp
     stats = norm_stats(train, rest, topo, robust, np.random.default_rng(seed))
     val_m, val_lab = val.gather(np.arange(len(val)))
     feats = {"val": clip_features(val_m, rest, topo)}
-    for mode in ("consistent", "lattice"):
-        m, _ = training_batch(train, idx, replace(robust, rotation=mode), np.random.default_rng(seed))
-        feats[f"train {mode}"] = clip_features(m, rest, topo)
+    for name, cfg in (("train robust", robust), ("train lattice", replace(robust, rotation="lattice")),
+                      ("train no jitter", replace(robust, jitter_px=0.0))):
+        m, _ = training_batch(train, idx, cfg, np.random.default_rng(seed))
+        feats[name] = clip_features(m, rest, topo)
+    step = np.linalg.norm(np.diff(val_m, axis=1), axis=-1)  # frame-to-frame motion of every marker
     off = rotation_offsets(train, idx, rng)
     return {"clips": {"train": len(train), "val": len(val), "sampled": len(idx)},
             "rotation_offset_px": {q: float(np.percentile(off, p)) for q, p in (("median", 50), ("p90", 90),
                                                                                ("max", 100))},
             "val_signal": displacement_signal(val, rest), "train_positive_share": 1.0 - stats.alpha,
+            "val_step_px": {q: float(np.percentile(step, p)) for q, p in (("p25", 25), ("median", 50), ("p75", 75))},
             "val_positive_share_all_frames": float(val_lab.mean()),
             "columns": {k: scaled_columns(v, stats) for k, v in feats.items()}}
 
@@ -98,6 +101,9 @@ def main(argv: list[str] | None = None) -> None:
     print(f"consistent rotation's offset per node: median {o['median']:.2f} px, p90 {o['p90']:.2f}, max {o['max']:.2f}; "
           f"val |marker - rest| at the central frame: positives {s['positive_px']:.2f} px, negatives "
           f"{s['negative_px']:.2f} px")
+    st = r["val_step_px"]
+    print(f"val frame-to-frame motion per marker (one clip step): p25 {st['p25']:.2f} px, median {st['median']:.2f}, "
+          f"p75 {st['p75']:.2f}")
     names = list(next(iter(r["columns"].values())))
     print("z-scored column: " + " | ".join(f"{k} mean/std" for k in r["columns"]))
     for n in names:
