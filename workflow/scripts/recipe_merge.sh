@@ -7,7 +7,7 @@
 # CPU, ~1 min), and palpation.apps.recipe_report makes the table from the profile's train.recipe_ablation
 # (PROFILE, default paper): every row complete (a missing run is an error) unless PARTIAL="why" is given.
 # With DOCS=1 (default) the report is copied to docs/results/{recipe_ablation,uncertainty}.csv and
-# docs/results/<profile>/recipe/report/, and for the paper profile docs/results.md is rebuilt by the results_page
+# docs/results/<profile>/recipe/report/ (PNGs colour-quantised), and for the paper profile docs/results.md is rebuilt by the results_page
 # app (its line 3, the run's provenance, kept from HEAD). Prints the table and the trajectory check (runs of
 # switches that train as the full robust recipe, against it: near 0 = same Sim set and code across sessions).
 set -euo pipefail
@@ -21,7 +21,7 @@ for tgz in "$@"; do
   [ -f "$tgz" ] || { echo "recipe_merge: $tgz not found" >&2; exit 2; }
   bad=$(tar tzf "$tgz" | grep -vE '^results/recipe/(reference|robust)/[a-z_]+/[A-Za-z-]+/L[0-9]+/seed[0-9]+/(metrics\.json|scores\.npz|pr\.npz)$' || true)
   [ -z "$bad" ] || { echo "recipe_merge: $tgz holds files other than recipe runs, e.g. $(echo "$bad" | head -1)" >&2; exit 2; }
-  replaced=$(tar tzf "$tgz" | grep 'metrics\.json$' | while read -r f; do [ -f "$f" ] && echo "$f"; done | wc -l)
+  replaced=$(tar tzf "$tgz" | grep 'metrics\.json$' | while read -r f; do if [ -f "$f" ]; then echo "$f"; fi; done | wc -l)
   tar xzf "$tgz"
   echo "$tgz: $(tar tzf "$tgz" | grep -c 'metrics\.json$') runs ($replaced replaced runs already here)"
 done
@@ -53,6 +53,10 @@ mkdir -p "docs/results/$profile/recipe/report"
 for f in recipe_ablation.csv recipe_ablation.md recipe_report.json reliability.png uncertainty.csv uncertainty_maps.png; do
   cp "$rep/$f" "docs/results/$profile/recipe/report/$f"
 done
+# the committed PNGs are colour-quantised to keep the repository small (as the other docs/results figures)
+"$py" -c "import sys; from PIL import Image
+for p in sys.argv[1:]: Image.open(p).convert('RGB').quantize(colors=256).save(p, optimize=True)" \
+  "docs/results/$profile/recipe/report/reliability.png" "docs/results/$profile/recipe/report/uncertainty_maps.png"
 if [ "$profile" = paper ]; then  # docs/results/*.csv and the page are the paper profile's
   cp "$rep/recipe_ablation.csv" "$rep/uncertainty.csv" docs/results/
   "$py" -m palpation.apps.results_page root=docs/results/paper out=docs/results.md links=results/paper profile=paper \
