@@ -128,3 +128,14 @@ def test_trajectory_check_compares_the_common_epochs_seed_by_seed():
     got = trajectory_check(full, moved)
     assert got["epochs_compared"] == 2 and got["max_rel_train_loss"] == pytest.approx(0.1)
     assert got["max_abs_val_fg_iou"] == pytest.approx(0.02) and got["max_abs_val_ap"] == 0.0
+
+
+def test_kept_validation_reads_the_kept_epochs_val_ap():
+    from palpation.apps.recipe_report import kept_validation
+
+    hist = [{"epoch": 0, "val/ap": 0.35}, {"epoch": 1, "val/ap": 0.33}]
+    assert kept_validation({"history": hist, "best_epoch": 0}) == (0.35, 0)
+    v, e = kept_validation({"history": [{"epoch": 0, "val/fg_iou": 0.2}], "best_epoch": 0})  # selected by FG IoU
+    assert v != v and e == 0
+    v, _ = kept_validation({"best_epoch": 3})
+    assert v != v
