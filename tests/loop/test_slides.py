@@ -175,3 +175,21 @@ def test_phantom_tilt_deepens_the_press_along_the_slope_and_stays_out_of_the_sim
     loop = {"params": {"odd": [{"k_f": 1e7}, {"k_f": 1e7, "mu": 0.8, "tilt_y": 0.01}], "even": [{"k_f": 1e7}]}}
     assert fold_params(loop, "odd") == {"k_f": 1e7, "mu": 0.8} and scene_params(loop, "odd") == {"tilt_y": 0.01}
     assert "tilt_y" not in str(twin_overrides(fold_params(loop, "odd"))) and scene_params(loop, "even") == {}
+
+
+def test_motion_decomposition_separates_common_translation_and_affine_motion():
+    from palpation.loop.slide_diagnosis import decomposition, replay_errors
+
+    s = toy_set(2, 5)
+    rest = s.rest.astype(np.float64)
+    x = rest - rest.mean(axis=0)
+    shift = np.linspace(-2, 2, 5)[:, None] * np.array([0.0, 1.0])  # the whole field drifts along y
+    scale = np.linspace(-0.01, 0.01, 5)[:, None, None]
+    markers = np.broadcast_to(rest + shift[:, None] + scale * x, (2, 5, 127, 2)).copy()
+    d = decomposition(markers, s.found, rest)
+    assert d["motion_px"] > 1.0 and d["common_translation_px"] == pytest.approx(1.2, abs=1e-9)
+    assert d["after_translation_px"] > 0.1 and d["after_affine_px"] < 1e-9 and d["lag1_autocorrelation"] > 0.4
+    assert d["jitter_px"] < 1e-9  # linear in time: no second difference
+    e = replay_errors(np.stack([markers, np.broadcast_to(rest, markers.shape)]), markers, s.found)
+    assert e["common_error_px"][0] < 1e-9 and e["rest_error_px"][0] < 1e-9
+    assert e["common_error_px"][1] == pytest.approx(1.2) and e["sim_common_px"][1] == 0.0

@@ -81,7 +81,7 @@ def test_table_task_end_to_end(tmp_path):
     sset = toy_set(4, 3)
     save_sequence_set(tmp_path / "seq", sset)
     cfg = {"profile": "toy", "sequences": str(tmp_path / "seq"), "experiments": {"silicone": "A-to-B", "meat": "A-to-C"},
-           "seeds": [0], "clip_len": 5, "figure_trial": None,
+           "seeds": [0], "clip_len": 5, "figure_trial": None, "trained_with": "robust",
            "candidates": {"calibrated": {"fitted_on": "photos"},
                           "slide_loop": {"fitted_on": "slides", "folds": ["odd", "even"]}},
            "runs": {}, "slides": {}, "out": {k: str(tmp_path / "out" / v) for k, v in
@@ -98,6 +98,7 @@ def test_table_task_end_to_end(tmp_path):
         np.savez(tmp_path / "slides" / f"{name}.npz", markers=sset.markers[[t - 1 for t in scored]], trials=scored)
     out = table(OmegaConf.create(cfg))
     assert out["chosen"] == "slide_loop"
+    assert "Models: recipe robust, every candidate alike." in (tmp_path / "out" / "t.md").read_text()
     df = pd.read_csv(tmp_path / "out" / "t.csv")
     assert list(df.columns) == list(COLUMNS) and df["chosen"].sum() == 1
     assert df.loc[df["twin"] == "slide_loop", "heldout_slide_mae_px"].item() == pytest.approx(2.25)
@@ -130,3 +131,14 @@ def test_results_page_section_checks_the_aims():
     bullets = twin_selection_section(df, rounds).bullets
     assert any(b.startswith("slide loop, fold odd") and "Symptom: E=2e+06 at its upper bound" in b for b in bullets)
     assert "slide loop, fold even: held-out motion MAE 5.000 -> 5.000 px (+0 %); added: nothing." in bullets
+
+
+def test_the_rule_s_table_overrides_compose():
+    """rule twin_selection passes trained_with=<judge.recipe>: a plain key, not the `recipe` config group."""
+    from hydra import compose, initialize_config_dir
+
+    from palpation.paths import REPO_ROOT
+
+    with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
+        cfg = compose("twin_judge", overrides=["task=table", "trained_with=robust", "seeds=[0,1]"])
+    assert cfg.trained_with == "robust" and "recipe" not in cfg

@@ -179,6 +179,6 @@ rule twin_selection:
         CONDA_ENV
     shell:
         "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.twin_judge task=table profile={params.profile}"
-        " 'seeds={params.seeds}' clip_len={params.clip_len} recipe={params.recipe} sequences={params.stem}"
+        " 'seeds={params.seeds}' clip_len={params.clip_len} trained_with={params.recipe} sequences={params.stem}"
         " {params.runs} {params.slides}"
         " out.csv={output.csv} out.md={output.md} out.figure={params.figure} {params.hydra} > {log} 2>&1"

@@ -106,7 +106,7 @@ def table(cfg: DictConfig) -> dict:
     save_text(c["out"]["csv"], csv_text(df.to_dict("records"), COLUMNS, 4, na_rep="nan"))
     rows = [[str(r[k]).replace("|", "/") if not isinstance(r[k], float) else f"{r[k]:.3f}" for k in COLUMNS]
             for r in df.to_dict("records")]
-    note = f"Models: recipe {c['recipe']}, every candidate alike.\n\n" if c.get("recipe") else ""
+    note = f"Models: recipe {c['trained_with']}, every candidate alike.\n\n" if c.get("trained_with") else ""
     save_text(c["out"]["md"], f"# Twin on the task ({c['profile']} profile)\n\n{note}" + markdown(list(COLUMNS), rows))
     chosen = str(df.loc[df["chosen"], "twin"].iloc[0])
     _figure(c, chosen, replays[chosen])
