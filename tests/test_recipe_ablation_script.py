@@ -73,8 +73,8 @@ def test_private_tree_with_the_carried_loop_plans_no_loop(tmp_path):
     work.mkdir()
     for name in ("Snakefile", "workflow", "conf", "data", "src"):
         os.symlink(REPO_ROOT / name, work / name)
-    for f in ("results/twin/mesh_coarse.npz", "results/twin/mesh_coarse.json", "results/data/photos/measured_photos.npz",
-              "results/data/photos/measured_photos.json"):
+    for f in ("results/twin/mesh_coarse.npz", "results/twin/mesh_coarse.json",
+              "results/data/photos/measured_photos.npz", "results/data/photos/measured_photos.json"):
         (work / f).parent.mkdir(parents=True, exist_ok=True)
         (work / f).write_text("carried")
     loop = tmp_path / "carried_loop"  # rule loop's outputs

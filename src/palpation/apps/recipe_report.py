@@ -186,10 +186,10 @@ def run(cfg: DictConfig) -> dict:
              "Calibration and early stopping use the training domain's validation split only."]
     val_rows = [r for r in rows if r["val_ap_kept"] == r["val_ap_kept"]]
     if val_rows:
+        kept = [f"{r['config']} {r['recipe']}{'' if r['switch_off'] == FULL else ' minus ' + r['switch_off']} "
+                f"{r['val_ap_kept']:.4f} (epochs {r['kept_epochs']})" for r in val_rows]
         notes.append("Validation AP of the kept checkpoints (the training domain's val split; what a recipe choice may "
-                     "read): " + "; ".join(f"{r['config']} {r['recipe']}"
-                                           f"{'' if r['switch_off'] == FULL else ' minus ' + r['switch_off']} "
-                                           f"{r['val_ap_kept']:.4f} (epochs {r['kept_epochs']})" for r in val_rows) + ".")
+                     "read): " + "; ".join(kept) + ".")
     if checks:
         worst = max(checks.values(), key=lambda v: v["max_abs_val_fg_iou"])
         notes.append(f"Same training as the full robust recipe where a switch only changes where training stops or "

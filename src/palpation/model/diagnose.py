@@ -8,8 +8,8 @@ This measures the candidate causes that need no training, on the Sim train and v
     rotated displacement, i.e. `consistent` minus `lattice`), against the vessel's displacement signal in val clips
     (|marker - rest| of positive and of negative markers at the central frame);
   * normalisation: each scaled feature column of val clips and of augmented training batches (robust; with
-    lattice rotation; without jitter), z-scored with the robust statistics (from the training clips): mean and std per column; a
-    val set that saw the same normalisation has mean ~0, std ~1 like the training batches;
+    lattice rotation; without jitter), z-scored with the robust statistics (from the training clips): mean and
+    std per column; a val set that saw the same normalisation has mean ~0, std ~1 like the training batches;
   * labels: the positive share of training and val markers (the focal α).
 """
 
@@ -98,7 +98,8 @@ def main(argv: list[str] | None = None) -> None:
     print(f"clips {r['clips']}; positive share: train {r['train_positive_share']:.4f}, val (all frames) "
           f"{r['val_positive_share_all_frames']:.4f}")
     o, s = r["rotation_offset_px"], r["val_signal"]
-    print(f"consistent rotation's offset per node: median {o['median']:.2f} px, p90 {o['p90']:.2f}, max {o['max']:.2f}; "
+    print(f"consistent rotation's offset per node: median {o['median']:.2f} px, p90 {o['p90']:.2f}, "
+          f"max {o['max']:.2f}; "
           f"val |marker - rest| at the central frame: positives {s['positive_px']:.2f} px, negatives "
           f"{s['negative_px']:.2f} px")
     st = r["val_step_px"]
