@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 import matplotlib
+import matplotlib.ticker
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -73,6 +74,7 @@ def plot_history(study: optuna.Study, n_startup: int, out_stem: str | os.PathLik
                        label="random (startup)")
         if baseline is not None:
             ax.axhline(baseline, color="0.4", ls="--", lw=1, label=f"undeformed sensor ({baseline:.2f})")
+        ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))  # trial numbers
         ax.legend(fontsize=7)
         ax.set_title(title, fontsize=8)
         fig = ax.figure
