@@ -143,3 +143,23 @@ def test_run_names_kind_span_and_linked_artefacts(results_tmp, tmp_path, monkeyp
     [stored] = (results_tmp / "mlartifacts" / "names").rglob("checkpoint.pt")
     assert stored.read_text() == "weights v1" and stored.stat().st_ino == inode  # one copy on disk
     assert tracking.run_name("photos") == "photos/quick"
+
+
+def test_model_logged_once_as_a_logged_model_pointing_at_its_checkpoint(results_tmp, tmp_path):
+    """A trained model: one LoggedModel (the Models tab) whose checkpoint is the run's hard-linked artefact."""
+    import mlflow
+
+    from palpation.io import save_text
+
+    checkpoint = tmp_path / "checkpoint.pt"
+    save_text(checkpoint, "weights")
+    with tracking.start_run("models", {"x": 1}, "A-to-B/L5", seed=0) as run:
+        model_id = tracking.log_checkpoint(checkpoint, {"model": "large", "seed": 0})
+    model = mlflow.MlflowClient(tracking.tracking_uri()).get_logged_model(model_id)
+    assert (model.name, model.model_type, model.source_run_id) == ("models_A-to-B_L5_seed0", "palpation-stgnn",
+                                                                    run.info.run_id)
+    assert model.params == {"model": "large", "seed": "0"}
+    assert model.tags["checkpoint"].endswith(f"{run.info.run_id}/artifacts/checkpoint.pt")
+    stored = list((results_tmp / "mlartifacts").rglob("checkpoint.pt"))
+    assert len(stored) == 1 and stored[0].stat().st_ino == checkpoint.stat().st_ino  # no second copy
+    assert not list((results_tmp / "mlartifacts").rglob("*.pth"))

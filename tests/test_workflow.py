@@ -55,6 +55,14 @@ def test_dry_run_lists_the_whole_dag(tmp_path):
     assert named | upstream | {"all"} == rules
     for rule in rules:
         assert f"rule {rule}:" in listing, f"{rule} has no job in the dry run's listing"
+    # every job times itself through Snakemake's benchmark directive, in its rule's file or folder (the
+    # results page and record_run read the rule from that path)
+    for job in re.split(r"\n(?=\[)", listing):
+        rule = re.search(r"^(?:local)?rule (\w+):", job, re.M)
+        if rule and rule.group(1) != "all":
+            bench = re.search(r"^    benchmark: (\S+)$", job, re.M)
+            assert bench, f"rule {rule.group(1)} has no benchmark: directive"
+            assert re.fullmatch(rf"results/benchmarks/{rule.group(1)}(\.tsv|/[^/]+\.tsv)", bench.group(1)), bench
 
 
 def test_train_command_carries_the_profile_sizes_and_recipe(tmp_path):

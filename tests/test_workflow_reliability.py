@@ -28,6 +28,7 @@ import pytest
 import yaml
 
 from palpation.paths import REPO_ROOT
+from palpation.report import reproduction
 from palpation.report.reproduction import job_stats
 
 pytestmark = pytest.mark.workflow
@@ -209,6 +210,9 @@ def tables(work: Path) -> dict[str, str]:
         if path.suffix not in (".csv", ".md") or rel.parts[1] == "mlartifacts":
             continue
         text = path.read_text()
+        if rel == Path("results/README.md"):  # the page's timing section is measured, the rest must match
+            head, _, rest = text.partition("\n## Timing\n")
+            text = head + rest[rest.find("\n## "):]
         if path.suffix == ".csv":
             rows = list(csv.reader(io.StringIO(text)))
             keep = [i for i, name in enumerate(rows[0]) if not TIMING_COLUMN.search(name)] if rows else []
@@ -223,6 +227,21 @@ def test_same_profile_twice_gives_identical_tables(runs):
     assert sorted(first) == sorted(second)
     differ = [name for name in first if first[name] != second[name]]
     assert not differ, f"tables differ between a killed+resumed and a clean run: {differ}"
+
+
+def test_every_job_timed_by_its_benchmark_file(runs):
+    """Snakemake's benchmark files time a fresh run: the page built inside it has the timing (no "No timing
+    record"), and onsuccess's record sums every rule of the run."""
+    ran = Counter(rule for rule, _ in jobs(runs.clean_log).values() if rule != "all")
+    timed = reproduction.benchmark_jobs(runs.clean / "results")
+    assert Counter(timed["rule"]) == ran and (timed["s"] > 0).all()
+    page = (runs.clean / "results" / "README.md").read_text()
+    section = page.split("\n## Timing\n")[1].split("\n## ")[0]
+    assert "No timing record" not in section
+    for rule in set(ran) - {"results_page"}:  # the page's own job ends after the page
+        assert f"| {rule} | {ran[rule]} | " in section, f"{rule} missing from the page's timing"
+    record = json.loads((runs.clean / "results" / "bench" / "reproduction.json").read_text())[-1]
+    assert set(record["per_rule"]) == set(ran) and record["profile"] == "tiny"
 
 
 def edit_reruns(work: Path, path: str, change) -> Counter:

@@ -131,6 +131,26 @@ def test_schema_types_the_config_and_refuses_unknown_keys():
     assert schema | {"device"} == {f.name for f in fields(TrainConfig)}
 
 
+def test_choice_keys_are_typed_by_the_schema():
+    """The recipe's choice keys are enums of the schema: a value outside them fails at composition, naming the
+    key and the choices; the library receives plain strings (MLflow params and outputs as before); a
+    TrainConfig built in code is checked against the same enums."""
+    from hydra.errors import ConfigCompositionException
+
+    from palpation.model.config import CHOICES, TrainConfig
+
+    for key, kind in CHOICES.items():
+        with pytest.raises(ConfigCompositionException) as err:
+            compose_train([f"recipe.{key}=stepp"])
+        assert f"full_key: recipe.{key}" in str(err.value.__cause__)
+        assert f"expected one of [{', '.join(kind.__members__)}]" in str(err.value.__cause__)
+        with pytest.raises(ValueError, match=rf"^{key}='stepp': use one of"):
+            TrainConfig(**{key: "stepp"})
+    train = job_from_config(compose_train(["recipe=robust"])).train
+    assert [type(getattr(train, key)) for key in CHOICES] == [str] * len(CHOICES)
+    assert (train.select_metric, train.calibration, train.rotation) == ("ap", "platt", "consistent")
+
+
 ROBUST_TINY = ["recipe=robust", "model=compact", "clip_len=2", "graph.rest=ideal", "train.batch_size=4",
                "train.epochs=3", "train.train_batches=2", "train.val_batches=null", "recipe.patience=1",
                "tracking=false"]

@@ -36,6 +36,8 @@ rule calibrate:
         gpu=GPU,
     log:
         "results/logs/calibration/calibrate.log",
+    benchmark:
+        "results/benchmarks/calibrate.tsv",
     conda:
         CONDA_ENV
     shell:
@@ -55,6 +57,8 @@ use rule calibrate as calibrate_reference with:
         preset="reference",
     log:
         "results/logs/calibration/calibrate_reference.log",
+    benchmark:
+        "results/benchmarks/calibrate_reference.tsv",
 
 
 rule bench_calibration:
@@ -72,6 +76,8 @@ rule bench_calibration:
         gpu=GPU,
     log:
         "results/logs/bench/calibration.log",
+    benchmark:
+        "results/benchmarks/bench_calibration.tsv",
     conda:
         CONDA_ENV
     shell:

@@ -24,6 +24,8 @@ rule simulate_dataset:
         gpu=GPU,
     log:
         "results/logs/sim/simulate_dataset.log",
+    benchmark:
+        "results/benchmarks/simulate_dataset.tsv",
     conda:
         CONDA_ENV
     shell:
@@ -47,3 +49,5 @@ use rule simulate_dataset as simulate_dataset_calibrated with:
         rule="simulate_dataset_calibrated",
     log:
         "results/logs/sim/simulate_dataset_calibrated.log",
+    benchmark:
+        "results/benchmarks/simulate_dataset_calibrated.tsv",

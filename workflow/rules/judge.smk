@@ -26,6 +26,8 @@ rule judge_fold_twin:
         hydra=lambda wildcards, output: hydra_dir(output.fit),
     log:
         "results/logs/judge/fold_twin_{fold}.log",
+    benchmark:
+        f"results/benchmarks/judge_fold_twin/fold_twin_{{fold}}.tsv",
     conda:
         CONDA_ENV
     shell:
@@ -57,6 +59,8 @@ rule judge_slides:
         gpu=GPU,
     log:
         "results/logs/judge/slides_{twin}.log",
+    benchmark:
+        f"results/benchmarks/judge_slides/slides_{{twin}}.tsv",
     conda:
         CONDA_ENV
     shell:
@@ -79,6 +83,8 @@ use rule simulate_dataset as judge_dataset with:
         rule="judge_dataset",
     log:
         "results/logs/judge/dataset_slide_loop_{fold}.log",
+    benchmark:
+        f"results/benchmarks/judge_dataset/dataset_slide_loop_{{fold}}.tsv",
 
 
 use rule train as judge_train with:
@@ -96,6 +102,8 @@ use rule train as judge_train with:
         seed=r"\d+",
     log:
         "results/logs/judge/train_{twin}_{exp}_L{clip_len}_seed{seed}.log",
+    benchmark:
+        f"results/benchmarks/judge_train/train_{{twin}}_{{exp}}_L{{clip_len}}_seed{{seed}}.tsv",
     params:
         rule="judge_train",
         overrides=lambda wildcards: train_overrides(wildcards, judge_sim(wildcards), JUDGE_RECIPE),
@@ -120,6 +128,8 @@ if TRAIN["seeds_together"] and JUDGE["seeds"]:
             clip_len=str(TRAIN["clip_len"]),
         log:
             "results/logs/judge/train_{twin}_L{clip_len}_seeds.log",
+        benchmark:
+            f"results/benchmarks/judge_train_seeds/train_{{twin}}_L{{clip_len}}_seeds.tsv",
         params:
             rule="judge_train_seeds",
             py=PY,
@@ -175,6 +185,8 @@ rule twin_selection:
         hydra=lambda wildcards, output: hydra_dir(output.csv),
     log:
         "results/logs/judge/twin_selection.log",
+    benchmark:
+        "results/benchmarks/twin_selection.tsv",
     conda:
         CONDA_ENV
     shell:

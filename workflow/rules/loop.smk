@@ -50,6 +50,8 @@ rule loop:
         gpu=GPU,
     log:
         "results/logs/loop/loop.log",
+    benchmark:
+        "results/benchmarks/loop.tsv",
     conda:
         CONDA_ENV
     shell:
@@ -80,6 +82,8 @@ rule loop_selftest:
         gpu=GPU,
     log:
         "results/logs/loop/loop_selftest.log",
+    benchmark:
+        "results/benchmarks/loop_selftest.tsv",
     conda:
         CONDA_ENV
     shell:
@@ -110,6 +114,8 @@ rule loop_selftest_full:
         gpu=GPU,
     log:
         "results/logs/loop/loop_selftest_full.log",
+    benchmark:
+        "results/benchmarks/loop_selftest_full.tsv",
     conda:
         CONDA_ENV
     shell:

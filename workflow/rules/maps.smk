@@ -24,6 +24,8 @@ rule vessel_maps:
         confusion=expand("results/maps/{config}_confusion{big}.png", config=MAPS_CONFIGS, big=["", "_big"]),
     log:
         "results/logs/maps/vessel_maps.log",
+    benchmark:
+        "results/benchmarks/vessel_maps.tsv",
     params:
         rule="vessel_maps",
         py=PY,

@@ -20,6 +20,8 @@ rule meat_set:
         figure=lambda wildcards, output: output.png[: -len(".png")],
     log:
         "results/logs/data/meat_set.log",
+    benchmark:
+        "results/benchmarks/meat_set.tsv",
     conda:
         CONDA_ENV
     shell:
@@ -43,6 +45,8 @@ rule data_summary:
         hydra=lambda wildcards, output: hydra_dir(output.csv),
     log:
         "results/logs/data/data_summary.log",
+    benchmark:
+        "results/benchmarks/data_summary.tsv",
     conda:
         CONDA_ENV
     shell:

@@ -35,6 +35,8 @@ rule measured_photos:
         photos_dir=lambda wildcards, input: Path(input.photos[0]).parent,
     log:
         "results/logs/data/measured_photos.log",
+    benchmark:
+        "results/benchmarks/measured_photos.tsv",
     conda:
         CONDA_ENV
     shell:

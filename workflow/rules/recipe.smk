@@ -15,6 +15,8 @@ rule train_recipe:
         checkpoint=f"{RECIPE_RUN}/checkpoint.pt",
     log:
         "results/logs/recipe/{recipe}_{switch}_{exp}_L{clip_len}_seed{seed}.log",
+    benchmark:
+        f"results/benchmarks/train_recipe/{{recipe}}_{{switch}}_{{exp}}_L{{clip_len}}_seed{{seed}}.tsv",
     wildcard_constraints:
         recipe="reference|robust",
         switch=r"[a-z_]+",
@@ -70,6 +72,8 @@ if TRAIN["seeds_together"] and RECIPE_ABL["seeds"]:
                 **recipe_seed_outputs(_exps, "{recipe}", "{switch}"),
             log:
                 f"results/logs/recipe/{{recipe}}_{{switch}}_{_group}_L{{clip_len}}_seeds.log",
+            benchmark:
+                f"results/benchmarks/train_recipe_seeds_{_group}/{{recipe}}_{{switch}}_L{{clip_len}}_seeds.tsv",
             wildcard_constraints:
                 recipe="reference|robust",
                 switch=r"[a-z_]+",
@@ -104,6 +108,8 @@ if TRAIN["seeds_together"] and RECIPE_ABL["seeds"]:
                 **recipe_seed_outputs(_exps, "robust", "none", "calibration"),
             log:
                 f"results/logs/recipe/robust_none_{_group}_L{{clip_len}}_seeds.log",
+            benchmark:
+                f"results/benchmarks/train_recipe_robust_{_group}/robust_none_L{{clip_len}}_seeds.tsv",
             wildcard_constraints:
                 clip_len=str(TRAIN["clip_len"]),
             params:
@@ -150,6 +156,8 @@ rule recipe_report:
         RECIPE_REPORT_FILES,
     log:
         "results/logs/recipe_report.log",
+    benchmark:
+        "results/benchmarks/recipe_report.tsv",
     params:
         rule="recipe_report",
         py=PY,

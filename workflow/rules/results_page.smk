@@ -1,8 +1,9 @@
 # The results page (issue 8): every table of the run beside the paper's numbers -> results/README.md.
 # Needs common.smk (PROFILE, hydra_dir, TWIN_ABLATION_FILES) and the rule files whose tables it reads;
 # include it after maps.smk. The inputs are the tables this profile produces; the twin ablation joins
-# where the profile runs it (TWIN_ABLATION_FILES not empty). bench/reproduction.json is read if present
-# but is no input: onsuccess writes it after the run, so the page shows the previous completed run's timing.
+# where the profile runs it (TWIN_ABLATION_FILES not empty). Its Timing section reads the benchmark files
+# of the jobs before it (results/benchmarks/, no inputs: a folder made before them must not rerun its
+# rules); the page lists every output of `rule all` (silicone_check's too) so that it is the run's last job.
 
 
 rule results_page:
@@ -16,6 +17,7 @@ rule results_page:
         maps_photo=rules.vessel_maps.output.photo,
         maps_json=rules.vessel_maps.output.json,
         render=plain(rules.render_twin.output.png),  # listed among the figures
+        silicone_check=rules.silicone_check.output.json,  # not read: the page comes last, timing every job
         twin_ablation=TWIN_ABLATION_FILES,  # common.smk; empty where the profile skips the ablation
         recipe=RECIPE_REPORT_FILES,  # common.smk; empty where the profile skips the recipe ablation
         judge=JUDGE_FILES,  # common.smk; empty where the profile skips the downstream judge (issue 12)
@@ -26,6 +28,8 @@ rule results_page:
         page=report("results/README.md", caption="../report/results_page.rst", category="Results page"),
     log:
         "results/logs/results_page.log",
+    benchmark:
+        "results/benchmarks/results_page.tsv",
     params:
         rule="results_page",
         py=PY,

@@ -20,6 +20,8 @@ rule silicone_set:
         figure=lambda wildcards, output: output.png[: -len(".png")],
     log:
         "results/logs/data/silicone_set.log",
+    benchmark:
+        "results/benchmarks/silicone_set.tsv",
     conda:
         CONDA_ENV
     shell:
@@ -42,6 +44,8 @@ rule silicone_check:
         hydra=lambda wildcards, output: hydra_dir(output.json),
     log:
         "results/logs/data/silicone_check.log",
+    benchmark:
+        "results/benchmarks/silicone_check.tsv",
     conda:
         CONDA_ENV
     shell:
@@ -67,6 +71,8 @@ rule silicone_sequences:
         stem=lambda wildcards, output: output.npz[: -len(".npz")],
     log:
         "results/logs/data/silicone_sequences.log",
+    benchmark:
+        "results/benchmarks/silicone_sequences.tsv",
     conda:
         CONDA_ENV
     shell:

@@ -24,6 +24,8 @@ rule simulate_canonical:
         gpu=GPU,
     log:
         "results/logs/twin/simulate_canonical.log",
+    benchmark:
+        "results/benchmarks/simulate_canonical.tsv",
     conda:
         CONDA_ENV
     shell:
@@ -49,6 +51,8 @@ rule simulate_vessel_slide:
         gpu=GPU,
     log:
         "results/logs/twin/simulate_vessel_slide.log",
+    benchmark:
+        "results/benchmarks/simulate_vessel_slide.tsv",
     conda:
         CONDA_ENV
     shell:
@@ -76,6 +80,8 @@ rule render_twin:
         hydra=lambda wildcards, output: hydra_dir(output.png),
     log:
         "results/logs/twin/render_twin.log",
+    benchmark:
+        "results/benchmarks/render_twin.tsv",
     conda:
         CONDA_ENV
     shell:
@@ -99,6 +105,8 @@ rule bench_twin:
         gpu=GPU,
     log:
         "results/logs/bench/twin.log",
+    benchmark:
+        "results/benchmarks/bench_twin.tsv",
     conda:
         CONDA_ENV
     shell:

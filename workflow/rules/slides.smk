@@ -23,6 +23,8 @@ rule slide_loop:
         gpu=GPU,
     log:
         "results/logs/loop/slide_loop.log",
+    benchmark:
+        "results/benchmarks/slide_loop.tsv",
     conda:
         CONDA_ENV
     shell:

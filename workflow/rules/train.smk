@@ -27,6 +27,8 @@ rule train:
         checkpoint=f"{TRAIN_RUN}/checkpoint.pt",
     log:
         "results/logs/train/{exp}_L{clip_len}_seed{seed}.log",
+    benchmark:
+        f"results/benchmarks/train/{{exp}}_L{{clip_len}}_seed{{seed}}.tsv",
     wildcard_constraints:
         exp="|".join(EXPERIMENTS),
         clip_len=r"\d+",
@@ -67,6 +69,8 @@ if TRAIN["seeds_together"]:
             checkpoint=expand(f"{TRAIN_RUN}/checkpoint.pt", seed=TRAIN["seeds"], allow_missing=True),
         log:
             "results/logs/train/{exp}_L{clip_len}_seeds.log",
+        benchmark:
+            f"results/benchmarks/train_seeds/{{exp}}_L{{clip_len}}_seeds.tsv",
         wildcard_constraints:
             exp="|".join(TRAIN["experiments"]),
             clip_len=str(TRAIN["clip_len"]),
@@ -112,6 +116,8 @@ rule bench_train:
         gpu=GPU,
     log:
         "results/logs/bench/train.log",
+    benchmark:
+        "results/benchmarks/bench_train.tsv",
     conda:
         CONDA_ENV
     shell:
@@ -128,6 +134,8 @@ rule train_report:
         TRAIN_REPORT_FILES,
     log:
         "results/logs/train_report.log",
+    benchmark:
+        "results/benchmarks/train_report.tsv",
     params:
         rule="train_report",
         py=PY,
@@ -165,6 +173,8 @@ use rule train as train_twin_ablation with:
         checkpoint=f"{TWIN_ABL_RUN}/checkpoint.pt",
     log:
         "results/logs/train/twin_calibrated_{exp}_L{clip_len}_seed{seed}.log",
+    benchmark:
+        f"results/benchmarks/train_twin_ablation/twin_calibrated_{{exp}}_L{{clip_len}}_seed{{seed}}.tsv",
     params:
         rule="train_twin_ablation",
         overrides=lambda wildcards: train_overrides(wildcards, rules.simulate_dataset_calibrated.output.manifest),
@@ -179,6 +189,8 @@ rule twin_ablation_report:
         TWIN_ABLATION_FILES,
     log:
         "results/logs/twin_ablation.log",
+    benchmark:
+        "results/benchmarks/twin_ablation_report.tsv",
     params:
         rule="twin_ablation_report",
         py=PY,

@@ -18,6 +18,8 @@ rule mesh:
         + f" hydra.job.name=mesh_{wildcards.resolution}",
     log:
         "results/logs/twin/mesh_{resolution}.log",
+    benchmark:
+        f"results/benchmarks/mesh/mesh_{{resolution}}.tsv",
     conda:
         CONDA_ENV
     shell:

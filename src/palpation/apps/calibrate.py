@@ -70,13 +70,13 @@ def _unit(name: str) -> str:
     return "" if unit in ("", "1") else f" {unit}"
 
 
-def draw_figures(out: Path, cal: CalibrationConfig, rows: list[dict], val, targets, images, fitted: dict,
+def draw_figures(out: Path, cal: CalibrationConfig, study, val, targets, images, fitted: dict,
                  resolution: str) -> None:
     """The search history and Fig. 4 for our fit and for the paper's adopted parameters."""
     maximise = cal.objective == "reference"
     fitted_rows = [r["undeformed_px"] for r in val.rows if r["used_for_fit"]]
     baseline = None if maximise else float(np.mean(fitted_rows))
-    plot_history(rows, cal.n_startup, maximise, out / "history", baseline=baseline,
+    plot_history(study, cal.n_startup, out / "history", baseline=baseline,
                  ylabel="vpn - van (maximised)" if maximise else "mean marker MAE, fitted photos (px)",
                  title=f"{cal.objective} objective, {cal.sampler} sampler, {resolution} mesh")
     real = {t.kind: t.markers for t in targets}
@@ -142,7 +142,7 @@ def run(cfg: DictConfig) -> dict:
         fit_option, fit_record = write_fitted(out, best.params, cal.fixed, record)
         tables = write_table(out, val, best.params)
 
-        draw_figures(out, cal, rows, val, prep.targets, photo_images(mset, cfg.photos_dir, prep.targets),
+        draw_figures(out, cal, study, val, prep.targets, photo_images(mset, cfg.photos_dir, prep.targets),
                      best.params, mesh.resolution)
         mean = val.summary["mean"]
         n_done = sum(r["state"] == "COMPLETE" for r in rows)

@@ -32,7 +32,7 @@ RECIPE_KEYS = ("lr", "weight_decay", "focal_gamma", "norm_stats", "norm_clips", 
 
 def job_from_config(cfg: DictConfig) -> TrainJob:
     """Plain dataclasses from the composed config (the only place that reads the DictConfig)."""
-    c = OmegaConf.to_container(cfg, resolve=True)
+    c = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)  # the choice keys' enums as their strings
     c.pop("hydra", None)
     train = TrainConfig(**{k: c["recipe"][k] for k in RECIPE_KEYS}, **c["train"], device=c["device"])
     return TrainJob(config_name=c["config_name"], seed=int(c["seed"]), clip_len=int(c["clip_len"]),
@@ -70,7 +70,7 @@ def run(cfg: DictConfig, out_dir: str | Path | None = None) -> dict | list[dict]
     if out_dir is None:
         out_dir = HydraConfig.get().runtime.output_dir
     job = job_from_config(cfg)
-    params = OmegaConf.to_container(cfg, resolve=True)
+    params = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
     params.pop("hydra", None)
     params["recipe"].pop("sizes", None)  # the chosen sizes are in train.*
     tags = {**_overrides(), "recipe": str(cfg.recipe.name)}  # MLflow tags only; outputs do not carry them

@@ -3,14 +3,17 @@
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 from typing import Mapping, Sequence
 
 import matplotlib
+import matplotlib.ticker
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+import optuna  # noqa: E402
 
 from palpation.camera import MM_PER_PX  # noqa: E402
 from palpation.io import save_figure  # noqa: E402
@@ -54,36 +57,28 @@ def plot_fig4(real: Mapping[str, np.ndarray], sim: Mapping[str, np.ndarray], mae
     return paths
 
 
-def draw_history(ax, rows: Sequence[Mapping], n_startup: int, maximise: bool, baseline: float | None = None,
-                 ylabel: str = "objective"):
-    """Trial values (random startup vs guided, diverged marked) and the best so far."""
-    done = [r for r in rows if r["state"] == "COMPLETE"]
-    x = np.array([r["trial"] for r in done])
-    y = np.array([r["value"] for r in done], float)
-    div = np.array([bool(r.get("diverged", False)) for r in done])
-    startup = np.arange(len(done)) < n_startup
-    for mask, label, style in ((startup & ~div, "random (startup)", dict(c="tab:blue")),
-                               (~startup & ~div, "GP-guided", dict(c="tab:orange")),
-                               (div, "diverged", dict(c="k", marker="x"))):
-        if mask.any():
-            ax.scatter(x[mask], y[mask], label=label, s=22, zorder=3, **style)
-    if len(y):
-        best = np.maximum.accumulate(y) if maximise else np.minimum.accumulate(y)
-        ax.step(x, best, where="post", color="tab:green", label="best so far")
-    if baseline is not None:
-        ax.axhline(baseline, color="0.4", ls="--", lw=1, label=f"undeformed sensor ({baseline:.2f})")
-    ax.set_xlabel("trial")
-    ax.set_ylabel(ylabel)
-    ax.legend(fontsize=7)
-    ax.grid(alpha=0.3)
-
-
-def plot_history(rows: Sequence[Mapping], n_startup: int, maximise: bool, out_stem: str | os.PathLike,
-                 baseline: float | None = None, ylabel: str = "objective", title: str = "") -> list[Path]:
-    fig, ax = plt.subplots(figsize=(5.0, 3.4), layout="constrained")
-    draw_history(ax, rows, n_startup, maximise, baseline, ylabel)
-    if title:
+def plot_history(study: optuna.Study, n_startup: int, out_stem: str | os.PathLike, baseline: float | None = None,
+                 ylabel: str = "objective", title: str = "") -> list[Path]:
+    """Optuna's optimisation history (every trial's value, the best so far) with the random startup trials
+    shaded, diverged simulations (the configured worst value) crossed out and the undeformed sensor's MAE."""
+    with matplotlib.rc_context(), warnings.catch_warnings():  # optuna sets the ggplot style globally
+        warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+        ax = optuna.visualization.matplotlib.plot_optimization_history(study, target_name=ylabel)
+        done = study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))
+        div = [t for t in done if t.user_attrs.get("diverged")]
+        if div:
+            ax.scatter([t.number for t in div], [t.value for t in div], c="k", marker="x", s=30, zorder=3,
+                       label="diverged")
+        if n_startup and done:
+            ax.axvspan(-0.5, min(n_startup, len(done)) - 0.5, color="tab:blue", alpha=0.08,
+                       label="random (startup)")
+        if baseline is not None:
+            ax.axhline(baseline, color="0.4", ls="--", lw=1, label=f"undeformed sensor ({baseline:.2f})")
+        ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))  # trial numbers
+        ax.legend(fontsize=7)
         ax.set_title(title, fontsize=8)
-    paths = save_figure(fig, out_stem, dpi=200)
+        fig = ax.figure
+        fig.set_size_inches(5.0, 3.4)
+        paths = save_figure(fig, out_stem, dpi=200)
     plt.close(fig)
     return paths

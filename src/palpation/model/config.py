@@ -3,16 +3,21 @@
 `ModelConfig` and `TrainConfig` are what the library takes; the train app builds them at the edge. The
 schema (`TrainAppConfig`, stored as `base_train`; conf/train.yaml starts with `defaults: [base_train]`)
 types every key of the composed config, so a typo or an unknown key (`+train.epoch=1`) fails when Hydra
-composes it. Values live in the YAML files (MISSING here); the schema only gives names and types.
+composes it. Values live in the YAML files (MISSING here); the schema only gives names and types, and
+the choice keys (norm_stats, rotation, schedule, select_metric, calibration) are enums, so OmegaConf
+refuses a value outside them at composition, naming the key (`recipe.schedule`) and the allowed values.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Dict, List, Optional
 
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
+
+from palpation.graph.augment import ROTATION_MODES
 
 
 @dataclass  # not frozen: it is also the schema of the `model` group (OmegaConf cannot merge into frozen nodes)
@@ -33,8 +38,15 @@ class ModelConfig:
                              f"encoder_width + type_dim ({self.encoder_width} + {self.type_dim})")
 
 
-SELECT_METRICS = ("fg_iou", "ap")
-CALIBRATIONS = ("none", "temperature", "platt")
+# The choice keys of a recipe. OmegaConf matches a YAML string to an enum member's *name*, so names equal
+# values; StrEnum members are those strings.
+NormStats = StrEnum("NormStats", {m: m for m in ("sample", "full")})
+Rotation = StrEnum("Rotation", {m: m for m in ROTATION_MODES})
+Schedule = StrEnum("Schedule", {m: m for m in ("none", "step")})
+SelectMetric = StrEnum("SelectMetric", {m: m for m in ("fg_iou", "ap")})
+Calibration = StrEnum("Calibration", {m: m for m in ("none", "temperature", "platt")})
+CHOICES = {"norm_stats": NormStats, "rotation": Rotation, "schedule": Schedule, "select_metric": SelectMetric,
+           "calibration": Calibration}
 
 
 @dataclass(frozen=True)
@@ -65,14 +77,11 @@ class TrainConfig:
     device: str = "cpu"
 
     def __post_init__(self):
-        if self.norm_stats not in ("sample", "full"):
-            raise ValueError(f"norm_stats must be 'sample' or 'full', got '{self.norm_stats}'")
-        if self.schedule not in ("none", "step"):
-            raise ValueError(f"schedule must be 'none' or 'step', got '{self.schedule}'")
-        if self.select_metric not in SELECT_METRICS:
-            raise ValueError(f"select_metric must be one of {SELECT_METRICS}, got '{self.select_metric}'")
-        if self.calibration not in CALIBRATIONS:
-            raise ValueError(f"calibration must be one of {CALIBRATIONS}, got '{self.calibration}'")
+        # the app's values passed the schema's enums; this guards a TrainConfig built in code
+        for key, kind in CHOICES.items():
+            if getattr(self, key) not in kind.__members__:
+                raise ValueError(f"{key}={getattr(self, key)!r}: use one of {list(kind.__members__)}")
+        # ranges and the null-or-positive patience: no OmegaConf type expresses these
         if self.jitter_px < 0 or not 0 <= self.marker_dropout < 1 or not 0 <= self.displacement_scale < 1:
             raise ValueError("jitter_px must be >= 0, marker_dropout and displacement_scale in [0, 1); got "
                              f"{self.jitter_px}, {self.marker_dropout}, {self.displacement_scale}")
@@ -107,18 +116,18 @@ class RecipeSchema:
     lr: float = MISSING
     weight_decay: float = MISSING
     focal_gamma: float = MISSING
-    norm_stats: str = MISSING
+    norm_stats: NormStats = MISSING
     norm_clips: Optional[int] = MISSING
-    rotation: str = MISSING
-    schedule: str = MISSING
+    rotation: Rotation = MISSING
+    schedule: Schedule = MISSING
     step_size: int = MISSING
     step_gamma: float = MISSING
     jitter_px: float = MISSING
     marker_dropout: float = MISSING
     displacement_scale: float = MISSING
     patience: Optional[int] = MISSING
-    select_metric: str = MISSING
-    calibration: str = MISSING
+    select_metric: SelectMetric = MISSING
+    calibration: Calibration = MISSING
     sizes: Dict[str, SizesSchema] = MISSING
 
 

@@ -215,7 +215,10 @@ def finish_job(job: TrainJob, result: FitResult, d: JobData, out_dir: str | Path
         tracking.log_metrics({"val/fg_iou_best": metrics["val_fg_iou"],
                               "time/train_s": result.train_seconds})
         for name in OUTPUTS:
-            tracking.log_artifact(out_dir / name)
+            if name != "checkpoint.pt":
+                tracking.log_artifact(out_dir / name)
+        tracking.log_checkpoint(out_dir / "checkpoint.pt", {"model": job.model.name, "clip_len": job.clip_len,
+                                                            "train_on": job.train_on, "seed": job.seed})
     log.info("test %s: AUROC %.4f AP %.4f FG %.4f BG %.4f", job.test_on, test_metrics["auroc"],
              test_metrics["ap"], test_metrics["fg_iou"], test_metrics["bg_iou"])
     return metrics

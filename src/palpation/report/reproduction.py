@@ -1,8 +1,11 @@
-"""Wall time of a workflow run, per rule, from Snakemake's own job metadata.
+"""Wall time of a workflow run, per rule, from Snakemake's `benchmark:` files.
 
-Snakemake records start and end times of every job in `.snakemake/metadata/`; the Snakefile's
-`onstart` stamps the run's start and `onsuccess` calls `record_run`, which sums job durations per rule
-for jobs of this run and writes `results/bench/reproduction.json` (one record per profile and device).
+Every rule names `benchmark: results/benchmarks/<rule>.tsv` (or `<rule>/<wildcards>.tsv` for a rule with
+wildcards); Snakemake writes the job's wall seconds (`s`), peak memory (`max_rss`, MB) and CPU time there
+when the job succeeds. The results page reads these files (so a page built inside a run already has the
+run's jobs); the Snakefile's `onstart` stamps the run's start and `onsuccess` calls `record_run`, which sums
+this run's jobs per rule into `results/bench/reproduction.json` (one record per profile and device; the
+committed docs/results/bench_reproduction.json is such a file).
 """
 
 from __future__ import annotations
@@ -12,29 +15,57 @@ import time
 from collections import Counter
 from pathlib import Path
 
+import pandas as pd
+
 from palpation.io import save_json, save_text
 from palpation.tracking import git_commit
 
 STAMP = "results/bench/.run_start"
+BENCHMARKS = "benchmarks"  # under the results root
+JOB_COLUMNS = ["rule", "job", "s", "max_rss", "cpu_time", "end"]
 
 
 def stamp_start(workdir: str | Path = ".") -> None:
     save_text(Path(workdir) / STAMP, f"{time.time()}\n")
 
 
-def jobs_since(metadata_dir: Path, since: float) -> dict[int, dict]:
-    """One entry per job (outputs of a job share its hash) started at or after `since`."""
-    jobs: dict[int, dict] = {}
-    for path in metadata_dir.glob("*"):
+def run_start(results: str | Path) -> float | None:
+    """The start of the latest run (`onstart`'s stamp) under a results root, or None."""
+    stamp = Path(results) / "bench" / ".run_start"
+    return float(stamp.read_text()) if stamp.exists() else None
+
+
+def benchmark_jobs(results: str | Path) -> pd.DataFrame:
+    """One row per job whose benchmark file is on disk (the job that made the outputs there): rule, job
+    (its wildcards, '' for a rule without), s (wall seconds), max_rss (MB), cpu_time (s) and end (the file's
+    mtime, s since the epoch: Snakemake writes it when the job ends)."""
+    root = Path(results) / BENCHMARKS
+    rows = []
+    for path in sorted(root.rglob("*.tsv")):
+        rel = path.relative_to(root)
         try:
-            meta = json.loads(path.read_text())
-        except (OSError, ValueError):
-            continue
-        start, end = meta.get("starttime"), meta.get("endtime")
-        if start is None or end is None or start < since or meta.get("incomplete"):
-            continue
-        jobs[meta.get("job_hash", hash(path.name))] = {"rule": meta["rule"], "s": end - start}
-    return jobs
+            table = pd.read_csv(path, sep="\t", na_values=["-"])
+        except (OSError, ValueError) as e:
+            raise ValueError(f"{path}: not a Snakemake benchmark file ({e}); delete it and rerun its rule") from None
+        if "s" not in table.columns or table.empty:
+            raise ValueError(f"{path}: no `s` column or no row; Snakemake's benchmark files have both; "
+                             "delete it and rerun its rule")
+        last = table.iloc[-1]  # `benchmark: repeat(...)` writes one row per repeat; the last is this run's job
+        rows.append({"rule": rel.parts[0].removesuffix(".tsv"), "job": "/".join(rel.with_suffix("").parts[1:]),
+                     "s": float(last["s"]), "max_rss": float(last.get("max_rss", float("nan"))),
+                     "cpu_time": float(last.get("cpu_time", float("nan"))), "end": path.stat().st_mtime})
+    return pd.DataFrame(rows, columns=JOB_COLUMNS)
+
+
+def per_rule(jobs: pd.DataFrame) -> pd.DataFrame:
+    """Jobs, summed wall seconds and the largest peak memory per rule, the slowest rule first."""
+    out = jobs.groupby("rule").agg(jobs=("s", "size"), s=("s", "sum"), max_rss=("max_rss", "max"))
+    return out.sort_values("s", ascending=False)
+
+
+def span_s(jobs: pd.DataFrame) -> float:
+    """Seconds from the first job's start (its end minus its wall time) to the last job's end."""
+    return float(jobs["end"].max() - (jobs["end"] - jobs["s"]).min()) if len(jobs) else 0.0
 
 
 def job_stats(log: str) -> Counter:
@@ -57,15 +88,15 @@ def job_stats(log: str) -> Counter:
 
 
 def record_run(profile: str, device: str, workdir: str | Path = ".") -> dict:
-    workdir = Path(workdir)
-    stamp = workdir / STAMP
-    since = float(stamp.read_text()) if stamp.exists() else 0.0
-    per_rule: dict[str, float] = {}
-    for job in jobs_since(workdir / ".snakemake" / "metadata", since).values():
-        per_rule[job["rule"]] = per_rule.get(job["rule"], 0.0) + job["s"]
+    """Append this run's record (jobs whose benchmark file was written since `onstart`) to
+    results/bench/reproduction.json, replacing the profile's and device's previous one."""
+    results = Path(workdir) / "results"
+    since = run_start(results) or 0.0
+    jobs = benchmark_jobs(results)
+    times = per_rule(jobs[jobs["end"] >= since])["s"]
     record = {"profile": profile, "device": device, "wall_s": round(time.time() - since, 1),
-              "per_rule": {k: round(v, 1) for k, v in sorted(per_rule.items())}, "commit": git_commit()}
-    out = workdir / "results" / "bench" / "reproduction.json"
+              "per_rule": {k: round(float(v), 1) for k, v in sorted(times.items())}, "commit": git_commit()}
+    out = results / "bench" / "reproduction.json"
     records = json.loads(out.read_text()) if out.exists() else []
     records = [r for r in records if (r["profile"], r["device"]) != (profile, device)] + [record]
     save_json(out, records)
