@@ -62,3 +62,34 @@ def test_a_part_runs_packs_and_resumes(tmp_path):
     assert "recipe.jitter_px=0.0" in log and "'also_test=[A-to-C:meat]'" in log
     again = script(work, "out", *args, PART="robust_jitter")  # a rerun keeps the finished job
     assert again.returncode == 0 and "Nothing to be done" in (work / "out/snakemake.log").read_text()
+
+
+@pytest.mark.slow  # one Snakemake dry run (~15 s idle, ~60 s on a loaded 2-core machine)
+def test_private_tree_with_the_carried_loop_plans_no_loop(tmp_path):
+    """TREE + LOOP_FROM (a device shared with the judge's Snakemake): the run happens in a private copy, and the
+    carried loop twin stands in for rule loop (and the carried photos and mesh for theirs), so the Sim set is rebuilt
+    from that fit. A dry run (-n) shows the plan."""
+    work = tmp_path / "wd"
+    work.mkdir()
+    for name in ("Snakefile", "workflow", "conf", "data", "src"):
+        os.symlink(REPO_ROOT / name, work / name)
+    for f in ("results/twin/mesh_coarse.npz", "results/twin/mesh_coarse.json", "results/data/photos/measured_photos.npz",
+              "results/data/photos/measured_photos.json"):
+        (work / f).parent.mkdir(parents=True, exist_ok=True)
+        (work / f).write_text("carried")
+    loop = tmp_path / "carried_loop"  # rule loop's outputs
+    for f in ("report.md", "loop_real.csv", "rounds.json", "twin_fit/fitted.yaml", "fitted_params.yaml", "rounds.png",
+              "rounds.pdf", "modes.png", "modes.pdf", "residuals/a.png", "tables/per_state.csv"):
+        (loop / f).parent.mkdir(parents=True, exist_ok=True)
+        (loop / f).write_text("fit")
+    (work / "toy.yaml").write_text(yaml.safe_dump(TOY))
+    tree = tmp_path / "tree"
+    done = script(work, "out", "--configfile", "toy.yaml", "-n", PART="robust_jitter", TREE=str(tree),
+                  LOOP_FROM=str(loop), GPU_SLOTS="5", PALPATION_RESULTS=str(tree / "results"))
+    log = (work / "out/snakemake.log").read_text()
+    assert done.returncode == 0, (done.stdout + done.stderr + log)[-3000:]
+    assert "Sim set's twin: carried loop fit" in done.stdout
+    jobs = {line.split()[0] for line in log.split("Job stats:")[1].split("total")[0].splitlines()[2:] if line.strip()}
+    assert "simulate_dataset" in jobs and "train_recipe_seeds_sim_large" in jobs
+    assert not jobs & {"loop", "measured_photos", "mesh"}, jobs
+    assert (tree / "results/loop/twin_fit/fitted.yaml").read_text() == "fit" and not (work / "results/loop").exists()

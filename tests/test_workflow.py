@@ -133,7 +133,17 @@ def test_judge_dag_when_turned_on(tmp_path):
     assert "train_twin_ablation" not in stats and stats["simulate_dataset_calibrated"] == 1
     extra.write_text("judge: {seeds: [0, 1], slide_loop: 'trials=[1,2] frames=[5,7]'}\ntrain: {seeds_together: true}\n")
     stats = job_stats(dry_run(tmp_path, "--configfile", str(extra)))
-    assert stats["judge_train_seeds"] == 3 * 2 and "judge_train" not in stats  # 3 twins x A-to-B/A-to-C
+    assert stats["judge_train_seeds"] == 3 and "judge_train" not in stats  # 3 twins, A-to-C scored by A-to-B's models
+    # judge.recipe other than train.recipe: photo_loop trains in the judge too, every candidate with that recipe
+    extra.write_text("judge: {seeds: [0, 1], slide_loop: 'trials=[1,2] frames=[5,7]', recipe: robust}\n"
+                     "train: {seeds_together: true}\n")
+    listing = dry_run(tmp_path, "-p", "--configfile", str(extra))
+    stats = job_stats(listing)
+    assert stats["judge_train_seeds"] == 4 and "judge_train" not in stats
+    cmds = [line for line in listing.splitlines() if "SNAKEMAKE_RULE=judge_train_seeds" in line]
+    assert len(cmds) == 4 and all("recipe=robust" in c and "also_test=[A-to-C:meat]" in c for c in cmds)
+    assert any("results/judge/train/photo_loop" in c for c in cmds)
+    assert stats["meat_set"] == 1  # A-to-C's test set: an input of the jobs that score it
 
 
 def test_paper_recipe_ablation_plan(tmp_path):

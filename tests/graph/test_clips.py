@@ -64,6 +64,21 @@ def test_sim_label_rule():
     assert sim_labels(markers, line, np.array([False])).tolist() == [[0, 0, 0]]
 
 
+def test_sim_labels_bit_identical_to_the_summed_squares():
+    """The fast distance (dx² + dy²) equals the original summed (..., 2) squares bit for bit, ties at the radius
+    included, so training batches and every reference output are unchanged."""
+    rng = np.random.default_rng(3)
+    markers = rng.uniform(0, 2000, (4, 5, 127, 2)).astype(np.float32)
+    line = (markers[:, :, :50] + rng.normal(0, 30, (4, 5, 50, 2))).astype(np.float32)
+    line[0, 0, 0] = markers[0, 0, 7] + np.float32([30.0, 0.0])  # exactly on the radius: not positive
+    contact = rng.random((4, 5)) < 0.8
+    d2 = ((markers[..., :, None, :].astype(np.float64) - line[..., None, :, :]) ** 2).sum(-1)
+    expected = ((d2.min(axis=-1) < 30.0 ** 2) & contact[..., None]).astype(np.int8)
+    got = sim_labels(markers, line, contact)
+    assert got.dtype == np.int8 and np.array_equal(got, expected)
+    assert 0 < expected.mean() < 1
+
+
 def test_rotation_permutation_is_consistent():
     rest = rest_layout("ideal")
     perms = rotation_permutations(rest)
@@ -95,3 +110,27 @@ def test_gather_rotation_keeps_labels_with_markers(consistent):
     else:  # quirk 14: node i keeps its id while moving to another site
         assert np.abs(m1 - rest).max() > 50
         assert np.array_equal(l1, l0)
+
+
+def test_lattice_rotation_moves_displacements_onto_the_sites():
+    """`lattice`: every node sits at its own rest site plus a rotated displacement, labels carried with the marker.
+    On the symmetric layout it is `consistent`; on the template the rest layout is not 6-fold symmetric about the
+    rotation centre, so `consistent` adds a static offset that `lattice` does not."""
+    ideal = rest_layout("ideal")
+    clips = ClipSet(_sim_seqs(ideal), 2, ideal)
+    m0, l0 = clips.gather([0], rotations=[0], lattice=True)
+    assert np.array_equal(m0, clips.gather([0])[0]) and np.array_equal(l0, clips.gather([0])[1])
+    mc, lc = clips.gather([0], rotations=[2], consistent=True)
+    ml, ll = clips.gather([0], rotations=[2], lattice=True)
+    assert np.allclose(ml, mc, atol=1e-3) and np.array_equal(ll, lc) and ll.sum() == l0.sum()
+
+    template = rest_layout("template")
+    clips = ClipSet(_sim_seqs(template), 2, template)
+    perm = rotation_permutations(template)[1]
+    m0, l0 = clips.gather([0])
+    ml, ll = clips.gather([0], rotations=[1], lattice=True)
+    mc, _ = clips.gather([0], rotations=[1], consistent=True)
+    d0 = np.linalg.norm(m0 - template, axis=-1)[:, :, perm]  # displacement sizes, renumbered
+    assert np.allclose(np.linalg.norm(ml - template, axis=-1), d0, atol=1e-3)  # only rotated: same sizes
+    assert np.array_equal(ll, l0[:, :, perm])
+    assert np.abs(np.linalg.norm(mc - template, axis=-1) - d0).max() > 5  # consistent: the layout's offset

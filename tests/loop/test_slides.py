@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from palpation.loop.folds import other, trial_folds
-from palpation.loop.slide_loop import SlideLoopSettings, candidates_of, run_slide_loop
+from palpation.loop.slide_loop import SearchSettings, SlideLoopSettings, at_bounds, candidates_of, run_slide_loop
 from palpation.loop.slides import frame_mae, frame_mae_abs, make_scene, motion, plan_replay, replay, slide_modes, vessel_ratio
 from palpation.markers.template import rest_template
 from palpation.measured_sequences import make_sequence_set
@@ -73,21 +73,33 @@ def test_replay_markers_and_metrics():
     assert np.isfinite(vessel_ratio(markers[0], s.labels))
 
 
-def test_rounds_pick_the_effect_that_lowers_the_fitted_error():
-    s = toy_set(4, 2)
-    truth = s.markers.astype(np.float64)
+def fake_twin(truth, want=None):
+    """A fake twin whose motion nears the real one as each parameter nears `want` (log distance for k_f, E)."""
+    want = want or {"k_f": 3e7, "mu": 0.8}
+    start = {"k_f": 1e7, "mu": 0.0, "E": 8.8e5}
+    calls = []
 
-    def evaluate(part, cands):  # a fake twin: its motion nears the real one as k_f nears 3e7 and mu nears 0.8
+    def evaluate(part, cands):
+        calls.append(len(cands))
         out = []
         for c in cands:
-            err = abs(np.log10(c.get("k_f", 1e7) / 3e7)) + abs(c.get("mu", 0.0) - 0.8)
+            err = sum(abs(np.log10(c.get(k, start[k]) / v)) if k in ("k_f", "E") else abs(c.get(k, start[k]) - v)
+                      for k, v in want.items())
             idx = [int(t["name"][1:]) - 1 for t in part.trials]
             out.append(truth[idx] + 5.0 + err * motion(truth[idx]))  # + a static offset the residual ignores
         return np.stack(out), np.zeros((len(cands), part.n_trials), bool)
+    return evaluate, calls
+
+
+def test_rounds_pick_the_effect_that_lowers_the_fitted_error():
+    s = toy_set(4, 2)
+    truth = s.markers.astype(np.float64)
+    evaluate, _ = fake_twin(truth)
 
     settings = SlideLoopSettings(effects={"compliant_phantom": {"k_f": [3e6, 3e7]}, "friction": {"mu": [0.3, 0.8]},
                                           "vessel_inclusion": {"incl_ratio": [5.0, 20.0]}},
-                                 base={"k_f": 1e7}, max_rounds=3, min_improvement_px=0.01).validate()
+                                 base={"k_f": 1e7}, max_rounds=3, min_improvement_px=0.01,
+                                 search=SearchSettings(sampler="grid")).validate()
     assert candidates_of({"mu": [0.3, 0.8], "k_t": [20, 60]}) == [{"mu": 0.3, "k_t": 20.0}, {"mu": 0.8, "k_t": 60.0}]
     result = run_slide_loop(evaluate, s, settings, [1, 2, 3, 4])
     rows = result["rows"]
@@ -104,3 +116,62 @@ def test_rounds_pick_the_effect_that_lowers_the_fitted_error():
         SlideLoopSettings(effects={"f": {"mu": [3.0]}}).validate()
     with pytest.raises(ValueError, match="unknown parameter 'young'"):
         SlideLoopSettings(effects={"f": {"young": [3.0]}}).validate()
+
+
+def test_continuous_search_finds_values_between_the_grid_points_and_reports_a_bound():
+    """search.sampler tpe: each effect's parameters searched within the registry's bounds in seeded batches;
+    the optimum lies between any grid's values (mu 0.63); an optimum beyond E's upper bound ends at the bound
+    and is reported as a symptom."""
+    s = toy_set(4, 2)
+    truth = s.markers.astype(np.float64)
+    evaluate, calls = fake_twin(truth, {"mu": 0.63, "E": 5e6})
+    settings = SlideLoopSettings(effects={"friction": {"mu": [0.3]}, "stiffness": {"E": [1e6]}}, base={},
+                                 max_rounds=2, min_improvement_px=0.01,
+                                 search=SearchSettings(sampler="tpe", batches=5, per_batch=6, seed=3)).validate()
+    result = run_slide_loop(evaluate, s, settings, [1, 2, 3, 4])
+    # per fold: the base twin on fit + held-out, then per round 5 batches of 6 asks per remaining effect + held-out
+    assert calls[:2] == [1, 1] and calls[2:7] == [12] * 5 and calls[8:13] == [6] * 5
+    for fold in ("odd", "even"):
+        final = result["params"][fold][-1]
+        assert abs(final["mu"] - 0.63) < 0.1 and final["E"] > 1.7e6
+        last = [r for r in result["rows"] if r["fold"] == fold][-1]
+        assert last["at_bounds"].startswith("E=") and "upper bound" in last["at_bounds"]
+    again = run_slide_loop(fake_twin(truth, {"mu": 0.63, "E": 5e6})[0], s, settings, [1, 2, 3, 4])
+    assert again["params"] == result["params"]  # seeded: deterministic
+    assert at_bounds({"E": 2.0e6, "mu": 0.5}) == ["E=2e+06 at its upper bound [100000, 2e+06] Pa"]
+    assert at_bounds({"E": 1.2e6, "mu": 0.0}) == ["mu=0 at its lower bound [0, 1.5] 1"]
+    with pytest.raises(ValueError, match="search.sampler"):
+        SlideLoopSettings(effects={}, search=SearchSettings(sampler="cma")).validate()
+
+
+def test_lead_in_slides_to_the_first_pose_at_depth():
+    s = toy_set(1, 3)
+    scene = make_scene(s)
+    plain, frames0 = plan_replay(s.pose_mm[0], scene, np.zeros(3))
+    lead, frames = plan_replay(s.pose_mm[0], scene, np.zeros(3), lead_in_mm=6.0)
+    np.testing.assert_allclose(lead.T_BA[frames][:, :3, 3], plain.T_BA[frames0][:, :3, 3], atol=1e-3)
+    tip = lead.T_BA[:frames[0]][:, :3, 3]
+    pressed = tip[:, 2] < PHANTOM_TOP_M - 1e-3  # > 1 mm into the phantom (the first pose: 2 mm) before frame 0
+    y_first = scene.to_twin(s.pose_mm[0, :1, :2])[0, 1]
+    assert tip[pressed, 1].max() > y_first + 4e-3  # pressed ~6 mm back along the slide (toy slides run -y)
+    assert (plain.T_BA[:frames0[0]][:, :3, 3][:, 2] < PHANTOM_TOP_M - 1e-3).sum() < pressed.sum()
+    with pytest.raises(ValueError, match="lead_in_mm"):
+        plan_replay(s.pose_mm[0, :1], scene, np.zeros(3), lead_in_mm=6.0)
+
+
+def test_phantom_tilt_deepens_the_press_along_the_slope_and_stays_out_of_the_sim_twin():
+    from palpation.loop.slide_twins import fold_params, scene_params, twin_overrides
+
+    s = toy_set(1, 3, step_mm=4.0)
+    scene = make_scene(s)
+    flat, f0 = plan_replay(s.pose_mm[0], scene, np.zeros(3))
+    tilted, f1 = plan_replay(s.pose_mm[0], scene, np.zeros(3), tilt=(0.0, 0.02))
+    z0, z1 = flat.T_BA[f0][:, 2, 3], tilted.T_BA[f1][:, 2, 3]
+    y_mm = s.pose_mm[0, :, 1] - scene.origin_mm[1]
+    np.testing.assert_allclose(z0 - z1, 0.02 * y_mm * 1e-3, atol=1e-3)  # deeper (lower z) towards +y
+    assert (z0 - z1)[0] > (z0 - z1)[-1]  # toy slides run -y: the press gets shallower along them
+    with pytest.raises(ValueError, match="leaves its physical bounds"):
+        SlideLoopSettings(effects={"t": {"tilt_y": [0.5]}}).validate()
+    loop = {"params": {"odd": [{"k_f": 1e7}, {"k_f": 1e7, "mu": 0.8, "tilt_y": 0.01}], "even": [{"k_f": 1e7}]}}
+    assert fold_params(loop, "odd") == {"k_f": 1e7, "mu": 0.8} and scene_params(loop, "odd") == {"tilt_y": 0.01}
+    assert "tilt_y" not in str(twin_overrides(fold_params(loop, "odd"))) and scene_params(loop, "even") == {}

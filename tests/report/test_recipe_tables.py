@@ -108,3 +108,34 @@ def test_partial_report_leaves_out_rows_with_missing_runs_and_says_so(tmp_path):
     assert "**Partial table**: 1 row(s)" in body and "switch off `jitter`: runs of seeds 0, 1 missing" in body
     assert "out of device time" in body
     assert "Partial" not in recipe_ablation_section(df, {"left_out": []}).body
+
+
+def test_trajectory_check_compares_the_common_epochs_seed_by_seed():
+    """A switch that only changes where training stops follows the full recipe's epochs: 0 for a copy over the epochs
+    both ran, and the largest difference where a Sim set or code changed."""
+    from palpation.apps.recipe_report import trajectory_check
+
+    def run(seed, losses, ious, aps=None):
+        hist = [{"epoch": e, "train/loss": l, "val/fg_iou": i, **({"val/ap": aps[e]} if aps else {})}
+                for e, (l, i) in enumerate(zip(losses, ious))]
+        return {"seed": seed, "metrics": {"history": hist}}
+
+    full = [run(0, [0.005, 0.004], [0.22, 0.20], [0.35, 0.33]), run(1, [0.006, 0.005], [0.21, 0.19], [0.34, 0.32])]
+    same = [run(0, [0.005, 0.004, 0.0039], [0.22, 0.20, 0.21], [0.35, 0.33, 0.34]), run(1, [0.006], [0.21], [0.34])]
+    assert trajectory_check(full, same) == {"epochs_compared": 3, "max_rel_train_loss": 0.0,
+                                            "max_abs_val_fg_iou": 0.0, "max_abs_val_ap": 0.0}
+    moved = [run(1, [0.006, 0.0055], [0.21, 0.17])]  # select_ap off: no val/ap in its history
+    got = trajectory_check(full, moved)
+    assert got["epochs_compared"] == 2 and got["max_rel_train_loss"] == pytest.approx(0.1)
+    assert got["max_abs_val_fg_iou"] == pytest.approx(0.02) and got["max_abs_val_ap"] == 0.0
+
+
+def test_kept_validation_reads_the_kept_epochs_val_ap():
+    from palpation.apps.recipe_report import kept_validation
+
+    hist = [{"epoch": 0, "val/ap": 0.35}, {"epoch": 1, "val/ap": 0.33}]
+    assert kept_validation({"history": hist, "best_epoch": 0}) == (0.35, 0)
+    v, e = kept_validation({"history": [{"epoch": 0, "val/fg_iou": 0.2}], "best_epoch": 0})  # selected by FG IoU
+    assert v != v and e == 0
+    v, _ = kept_validation({"best_epoch": 3})
+    assert v != v

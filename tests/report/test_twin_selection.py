@@ -126,3 +126,7 @@ def test_results_page_section_checks_the_aims():
     assert "| odd | 1 | stiffness | 2.000 | 3.000 | 1.20 / 1.30 |" in sec.body
     assert "slide loop, fold odd: held-out motion MAE 4.000 -> 3.000 px (-25 %); added: stiffness." in sec.bullets
     assert "slide loop, fold even: held-out motion MAE 5.000 -> 5.000 px (+0 %); added: nothing." in sec.bullets
+    rounds["at_bounds"] = [np.nan, "E=2e+06 at its upper bound [100000, 2e+06] Pa", np.nan]  # as read from the csv
+    bullets = twin_selection_section(df, rounds).bullets
+    assert any(b.startswith("slide loop, fold odd") and "Symptom: E=2e+06 at its upper bound" in b for b in bullets)
+    assert "slide loop, fold even: held-out motion MAE 5.000 -> 5.000 px (+0 %); added: nothing." in bullets

@@ -136,9 +136,9 @@ def train_data(wildcards, sim=TRAIN_DATA["sim"]):
     return {name: sim if name == "sim" else TRAIN_DATA[name] for name in EXPERIMENTS[wildcards.exp].datasets}
 
 
-def train_inputs(wildcards, sim=TRAIN_DATA["sim"]):
+def train_inputs(wildcards, sim=TRAIN_DATA["sim"], recipe=TRAIN["recipe"]):
     """The datasets and the conf/ files of this configuration (experiment overlay, model, recipe)."""
-    choices = {"experiment": wildcards.exp, "model": EXPERIMENTS[wildcards.exp].model, "recipe": TRAIN["recipe"]}
+    choices = {"experiment": wildcards.exp, "model": EXPERIMENTS[wildcards.exp].model, "recipe": recipe}
     return {**train_data(wildcards, sim), "conf": conf_files("train", choices)}
 
 
@@ -147,11 +147,15 @@ def size_knobs(sizes):
     return [f"train.{k}={'null' if v is None else v}" for k, v in sizes.items()]
 
 
-def train_overrides(wildcards, sim=TRAIN_DATA["sim"]):
-    """Dataset paths and the profile's size knobs for this configuration's model, as Hydra overrides."""
+def train_overrides(wildcards, sim=TRAIN_DATA["sim"], recipe=TRAIN["recipe"]):
+    """Dataset paths and the profile's size knobs for this configuration's model, as Hydra overrides. Another
+    recipe than train.recipe takes the profile's sizes for it where the recipe ablation sets them
+    (train.recipe_ablation.sizes), else train.sizes; a knob left out keeps the recipe's own value."""
     data = [f"data.{k}={v}" for k, v in train_data(wildcards, sim).items()]
-    sizes = TRAIN["sizes"].get(EXPERIMENTS[wildcards.exp].model) or {}
-    return " ".join(data + size_knobs(sizes) + [f"recipe={TRAIN['recipe']}"])
+    model = EXPERIMENTS[wildcards.exp].model
+    own = (RECIPE_ABL.get("sizes") or {}).get(recipe) if recipe != TRAIN["recipe"] else None
+    sizes = (own if own is not None else TRAIN["sizes"]).get(model) or {}
+    return " ".join(data + size_knobs(sizes) + [f"recipe={recipe}"])
 
 
 def recipe_inputs(wildcards, exps=None):
@@ -258,9 +262,14 @@ def maps_inputs(wildcards):
 JUDGE_DIR = "results/judge"
 JUDGE_FOLDS = ["odd", "even"]
 JUDGE_TWINS = ["calibrated", "photo_loop"] + [f"slide_loop_{f}" for f in JUDGE_FOLDS]
-JUDGE_TRAINED = ["calibrated"] + [f"slide_loop_{f}" for f in JUDGE_FOLDS]  # runs judge.smk trains (photo_loop: the sweep's)
+# judge.recipe: the recipe every candidate's models train with (null: the profile's train.recipe); with another
+# recipe than the main sweep's, photo_loop trains here too instead of reusing the sweep's runs (docs/loop.md)
+JUDGE_RECIPE = JUDGE.get("recipe") or TRAIN["recipe"]
+JUDGE_OWN_PHOTO = JUDGE_RECIPE != TRAIN["recipe"]
+JUDGE_TRAINED = (["calibrated"] + (["photo_loop"] if JUDGE_OWN_PHOTO else [])
+                 + [f"slide_loop_{f}" for f in JUDGE_FOLDS])  # runs judge.smk trains (else photo_loop: the sweep's)
 JUDGE_RUN = str(run_dir(f"{JUDGE_DIR}/train/{{twin}}", "{exp}", "{clip_len}", "{seed}"))
-JUDGE_EXPERIMENTS = ["A-to-B", "A-to-C"]  # Sim -> Silicone (cross-fitted), Sim -> Meat
+JUDGE_EXPERIMENTS = ["A-to-B", "A-to-C"]  # Sim -> Silicone (cross-fitted), Sim -> Meat: both train on Sim
 JUDGE_FILES = (
     [f"{JUDGE_DIR}/{n}" for n in ("twin_selection.csv", "twin_selection.md", "slide_motion.png", "slide_motion.pdf")]
     if JUDGE["seeds"] else []
@@ -276,7 +285,7 @@ def judge_fit(twin):
 
 
 def judge_runs_root(twin):
-    return TRAIN_DIR if twin == "photo_loop" else f"{JUDGE_DIR}/train/{twin}"
+    return TRAIN_DIR if twin == "photo_loop" and not JUDGE_OWN_PHOTO else f"{JUDGE_DIR}/train/{twin}"
 
 
 def judge_scores():
@@ -288,7 +297,24 @@ def judge_sim(wildcards):
     """A trained candidate's Sim set: the calibrated twin's is the twin ablation's (same draws), a fold twin's its own."""
     if wildcards.twin == "calibrated":
         return rules.simulate_dataset_calibrated.output.manifest
+    if wildcards.twin == "photo_loop":
+        return TRAIN_DATA["sim"]
     return f"{JUDGE_DIR}/sim/{wildcards.twin}/manifest.json"
+
+
+def judge_first(wildcards):
+    """The candidate's first configuration (A-to-B): the one a seeds-together job trains."""
+    return SimpleNamespace(exp=JUDGE_EXPERIMENTS[0], twin=wildcards.twin)
+
+
+def judge_seeds_inputs(wildcards):
+    """Every judged configuration's datasets and conf/ files: one job trains A-to-B and scores A-to-C (Meat)."""
+    out = {}
+    for exp in JUDGE_EXPERIMENTS:
+        one = train_inputs(SimpleNamespace(exp=exp, twin=wildcards.twin), judge_sim(wildcards), JUDGE_RECIPE)
+        conf = sorted(set(out.get("conf", [])) | set(one.pop("conf")))
+        out.update(one, conf=conf)
+    return out
 
 
 # Every job knows its profile (MLflow tags runs with it) and writes no MLflow artefacts into ./mlruns.

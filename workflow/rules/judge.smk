@@ -83,7 +83,7 @@ use rule simulate_dataset as judge_dataset with:
 
 use rule train as judge_train with:
     input:
-        unpack(lambda wildcards: train_inputs(wildcards, judge_sim(wildcards))),
+        unpack(lambda wildcards: train_inputs(wildcards, judge_sim(wildcards), JUDGE_RECIPE)),
     output:
         metrics=f"{JUDGE_RUN}/metrics.json",
         scores=f"{JUDGE_RUN}/scores.npz",
@@ -98,31 +98,53 @@ use rule train as judge_train with:
         "results/logs/judge/train_{twin}_{exp}_L{clip_len}_seed{seed}.log",
     params:
         rule="judge_train",
-        overrides=lambda wildcards: train_overrides(wildcards, judge_sim(wildcards)),
+        overrides=lambda wildcards: train_overrides(wildcards, judge_sim(wildcards), JUDGE_RECIPE),
 
 
 # train.seeds_together (the paper profile): a candidate's judge.seeds in one process, as rule train_seeds does
-# for the main sweep (stacked models, issue 17: five seeds in ~0.46x the time of five runs on the H100).
+# for the main sweep (stacked models, issue 17: five seeds in ~0.46x the time of five runs on the H100). A-to-B
+# and A-to-C train the same models on the candidate's Sim set, so one job trains them once and scores both test
+# sets (app key also_test, as the recipe ablation does): every candidate alike.
 if TRAIN["seeds_together"] and JUDGE["seeds"]:
 
-    use rule train_seeds as judge_train_seeds with:
+    rule judge_train_seeds:
         input:
-            unpack(lambda wildcards: train_inputs(wildcards, judge_sim(wildcards))),
+            unpack(judge_seeds_inputs),
         output:
-            metrics=expand(f"{JUDGE_RUN}/metrics.json", seed=JUDGE["seeds"], allow_missing=True),
-            scores=expand(f"{JUDGE_RUN}/scores.npz", seed=JUDGE["seeds"], allow_missing=True),
-            pr=expand(f"{JUDGE_RUN}/pr.npz", seed=JUDGE["seeds"], allow_missing=True),
-            checkpoint=expand(f"{JUDGE_RUN}/checkpoint.pt", seed=JUDGE["seeds"], allow_missing=True),
+            **{key: [str(run_dir(f"{JUDGE_DIR}/train/{{twin}}", e, "{clip_len}", s) / name)
+                     for e in JUDGE_EXPERIMENTS for s in JUDGE["seeds"]]
+               for key, name in (("metrics", "metrics.json"), ("scores", "scores.npz"), ("pr", "pr.npz"),
+                                 ("checkpoint", "checkpoint.pt"))},
         wildcard_constraints:
             twin="|".join(JUDGE_TRAINED),
-            exp="|".join(JUDGE_EXPERIMENTS),
             clip_len=str(TRAIN["clip_len"]),
         log:
-            "results/logs/judge/train_{twin}_{exp}_L{clip_len}_seeds.log",
+            "results/logs/judge/train_{twin}_L{clip_len}_seeds.log",
         params:
             rule="judge_train_seeds",
-            overrides=lambda wildcards: train_overrides(wildcards, judge_sim(wildcards)),
+            py=PY,
+            exp=JUDGE_EXPERIMENTS[0],
+            overrides=lambda wildcards: " ".join(
+                [train_overrides(judge_first(wildcards), judge_sim(wildcards), JUDGE_RECIPE)]
+                + [f"data.{k}={v}" for k, v in judge_seeds_inputs(wildcards).items()
+                   if k not in ("conf", "sim", EXPERIMENTS[JUDGE_EXPERIMENTS[0]].test_on)]  # the other test sets
+                + ["'also_test=[" + ",".join(f"{e}:{EXPERIMENTS[e].test_on}" for e in JUDGE_EXPERIMENTS[1:]) + "]'"]),
             seeds=yaml_list(JUDGE["seeds"]),
+            # the app writes seed s of A-to-B to <run dir>/seed<s>/ (run dir = its L<clip_len> folder), A-to-C beside it
+            hydra=lambda wildcards, output: (f"hydra.run.dir={Path(output.metrics[0]).parents[1]}"
+                                             " hydra.output_subdir=.hydra/seeds"),
+            profile=PROFILE,
+            device=config["device"],
+        threads: TRAIN.get("threads", 1)
+        resources:
+            gpu=GPU,
+        conda:
+            CONDA_ENV
+        shell:
+            ("OMP_NUM_THREADS={threads} " if "threads" in TRAIN else "")
+            + "PALPATION_PROFILE={params.profile} SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.train"
+            " experiment={params.exp} 'seeds={params.seeds}' clip_len={wildcards.clip_len}"
+            " device={params.device} {params.overrides} {params.hydra} > {log} 2>&1"
 
     ruleorder: judge_train_seeds > judge_train
 
@@ -145,6 +167,7 @@ rule twin_selection:
         profile=PROFILE,
         seeds=yaml_list(JUDGE["seeds"]),
         clip_len=TRAIN["clip_len"],
+        recipe=JUDGE_RECIPE,
         stem=lambda wildcards, input: input.npz[: -len(".npz")],
         runs=" ".join(f"runs.{t}={judge_runs_root(t)}" for t in JUDGE_TWINS),
         slides=" ".join(f"slides.{t}={JUDGE_DIR}/slides/{t}.json" for t in JUDGE_TWINS),
@@ -156,5 +179,6 @@ rule twin_selection:
         CONDA_ENV
     shell:
         "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.twin_judge task=table profile={params.profile}"
-        " 'seeds={params.seeds}' clip_len={params.clip_len} sequences={params.stem} {params.runs} {params.slides}"
+        " 'seeds={params.seeds}' clip_len={params.clip_len} recipe={params.recipe} sequences={params.stem}"
+        " {params.runs} {params.slides}"
         " out.csv={output.csv} out.md={output.md} out.figure={params.figure} {params.hydra} > {log} 2>&1"

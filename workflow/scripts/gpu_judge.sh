@@ -41,7 +41,14 @@ done
 targets="results/judge/twin_selection.csv results/judge/twin_selection.md results/judge/slide_motion.png
   results/judge/slide_motion.pdf results/loop_slides/loop_slides.csv"
 snake=(python3 -m snakemake --workflow-profile "workflow/profiles/$profile" --cores "${CORES:-$(nproc)}")
-"${snake[@]}" --unlock > /dev/null 2>&1  # a run cut short keeps the lock; no other run is going (pid file)
+# another Snakemake run in this checkout (e.g. gpu_recipe_ablation.sh) holds the lock: unlocking would let both
+# build the shared upstream files (Sim set, data sets) at once; the judge then needs its own copy of the checkout
+if [ -n "$(ls -A .snakemake/locks 2>/dev/null)" ] && pgrep -f "snakemake --workflow-profile" > /dev/null; then
+  echo "gpu_judge: another Snakemake run holds this checkout's lock; run the judge in its own copy of the checkout" \
+    "(docs/loop.md, \"Paper-profile run\")" >&2
+  rm -f "$pidf"; exit 4
+fi
+"${snake[@]}" --unlock > /dev/null 2>&1  # a run cut short keeps the lock; no other run is going (checked above)
 start=$(date +%s)
 touch "$out/snakemake.log"; seen=$(wc -l < "$out/snakemake.log")  # the log grows over resumed calls
 # shellcheck disable=SC2086

@@ -24,7 +24,7 @@ start=$(date +%s)
 # LIMIT_S: stop cleanly before the device's per-command limit; OUTDIR under results/ survives on a warm
 # machine, and the same command resumes there (a fresh machine starts over)
 timeout -s INT "${LIMIT_S:-0}" python3 -m palpation.apps.loop mode=selftest track=false progress=false twin.device=cuda mesh="$mesh" \
-  measured="$measured" loop.selftest.runs_per_case="${RUNS:-5}" loop.split_by_kind=false loop.final_refit_starts=3 \
+  measured="$measured" loop.selftest.runs_per_case="${RUNS:-5}" loop.split_by_kind=false loop.final_refit_starts=3 loop.compete=true \
   loop.search.ask_workers="${ASK_WORKERS:-$(nproc)}" out.dir="$out" hydra.run.dir="$out/hydra" "$@" \
   > "$out/selftest.log" 2>&1
 rc=$?

@@ -11,12 +11,22 @@
 #   again re-attaches to a run still going (OUTDIR/snakemake.pid), or starts the next one, which keeps the
 #   finished jobs (a job cut by a fresh machine is redone whole). Exit 0: done; 75: still running; else
 #   Snakemake's status. OUTDIR gets recipe_runs.tgz (every finished run's metrics.json, scores.npz, pr.npz,
-#   no checkpoints), the report when made, and the logs.
+#   no checkpoints), the report when made, the logs and sim_fingerprint.txt (sha256 of the Sim set's files).
+# Sharing the machine (docs/recipe.md "Finishing the ablation"):
+#   TREE=DIR runs in a private copy of this working tree at DIR (made once; results/ is not copied, only the
+#     carried inputs results/twin/mesh_*, results/data/photos), so another Snakemake in the repo root (the judge)
+#     holds no lock this run needs. OUTDIR is taken relative to the repo root, before the switch.
+#   LOOP_FROM=PATH (a results/loop folder, or a .tgz holding results/loop/): the Sim set's twin is that loop's
+#     fit, installed as results/loop and marked newer than its inputs so rule loop does not rerun; the earlier
+#     sessions' rows were trained on the Sim set of docs/results/paper/loop/twin_fit/fitted.yaml.
+#   GPU_SLOTS=N lets N GPU jobs share the card (the profile's gpu=4); CORES overrides the profile's cores
+#     (Snakemake counts 4 threads a training job: five jobs at once need CORES=20 on the 16-core host).
 set -uo pipefail
 out=${1:?usage: gpu_recipe_ablation.sh OUTDIR [snakemake args...]}; shift
 profile=${PROFILE:-paper}
 [ -d "workflow/profiles/$profile" ] || { echo "gpu_recipe_ablation: no workflow/profiles/$profile" >&2; exit 2; }
-export PYTHONPATH="$PWD/src${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
+pythonpath=${PYTHONPATH:-}
+export PYTHONPATH="$PWD/src${pythonpath:+:$pythonpath}" PYTHONUNBUFFERED=1
 switches=$(python3 -c "from palpation.model.recipe import SWITCHES; print(' '.join(SWITCHES))") || exit 3
 targets=()
 for part in ${PART:-all}; do
@@ -28,6 +38,44 @@ for part in ${PART:-all}; do
 done
 mkdir -p "$out"
 out=$(cd "$out" && pwd)
+if [ -n "${TREE:-}" ]; then
+  if [ ! -f "$TREE/.recipe_tree" ]; then  # once: a second call re-attaches to the same tree
+    mkdir -p "$TREE/results/data"
+    tar -cf - --exclude=./results --exclude=./.snakemake --exclude=./.venv --exclude=./mlruns . | tar -xf - -C "$TREE"
+    [ -d results/twin ] && cp -a results/twin "$TREE/results/"
+    [ -d results/data/photos ] && cp -a results/data/photos "$TREE/results/data/"
+    [ -d results/recipe ] && cp -a results/recipe "$TREE/results/"  # finished runs of an earlier call here
+    touch "$TREE/.recipe_tree"
+  fi
+  cd "$TREE" || exit 2
+  export PYTHONPATH="$PWD/src${pythonpath:+:$pythonpath}"  # the tree's own code
+fi
+# the carried mesh must look newer than its conf so that rule mesh (gmsh) never reruns here (as gpu_judge.sh)
+res=$(sed -n 's/^twin_resolution: *\([a-z]*\).*/\1/p' "conf/workflow/$profile.yaml")
+for c in conf/mesh.yaml "conf/twin/mesh/$res.yaml"; do
+  [ -f "results/twin/mesh_$res.npz" ] && [ "$c" -nt "results/twin/mesh_$res.npz" ] &&
+    touch "results/twin/mesh_$res.npz" "results/twin/mesh_$res.json"
+done
+if [ -n "${LOOP_FROM:-}" ] && [ ! -f results/loop/.carried ]; then
+  src=$LOOP_FROM; [ -e "$src" ] || src="$OLDPWD/$LOOP_FROM"  # relative to the repo root, as OUTDIR
+  # the loop's inputs (the carried photo measurements) older than its outputs: neither reruns
+  [ -d results/data/photos ] && touch results/data/photos/*
+  if [ -z "${TREE:-}" ] && [ -e results/loop ]; then
+    echo "gpu_recipe_ablation: LOOP_FROM would replace results/loop here; give TREE=DIR (a private copy)" >&2; exit 2
+  fi
+  rm -rf results/loop
+  case "$src" in
+    *.tgz|*.tar.gz) tar -xzf "$src" results/loop || exit 2 ;;
+    *) [ -f "$src/twin_fit/fitted.yaml" ] || { echo "gpu_recipe_ablation: LOOP_FROM $LOOP_FROM has no twin_fit/fitted.yaml" >&2
+         exit 2; }
+       mkdir -p results && cp -a "$src" results/loop ;;
+  esac
+  sleep 1; find results/loop -exec touch {} +; touch results/loop/.carried
+  echo "Sim set's twin: carried loop fit $(sha256sum results/loop/twin_fit/fitted.yaml | cut -c1-16)"
+fi
+snake_opts=()
+[ -n "${GPU_SLOTS:-}" ] && snake_opts+=("--resources=gpu=$GPU_SLOTS")  # one value: --resources takes several
+[ -n "${CORES:-}" ] && snake_opts+=("--cores=$CORES")
 pid=$(cat "$out/snakemake.pid" 2>/dev/null)
 if [ -n "$pid" ] && kill -0 "$pid" 2>/dev/null; then
   echo "re-attaching to the run still going (pid $pid)"
@@ -37,7 +85,7 @@ else
     python3 -m snakemake --workflow-profile "workflow/profiles/$profile" --unlock > /dev/null 2>&1
   rm -f "$out/snakemake.rc"
   setsid bash -c 'python3 -m snakemake --workflow-profile "$0" --keep-going "${@:2}" >> "$1/snakemake.log" 2>&1
-                  echo $? > "$1/snakemake.rc"' "workflow/profiles/$profile" "$out" "${targets[@]}" "$@" \
+                  echo $? > "$1/snakemake.rc"' "workflow/profiles/$profile" "$out" "${snake_opts[@]}" "${targets[@]}" "$@" \
     < /dev/null > /dev/null 2>&1 &
   pid=$!
   echo "$pid" > "$out/snakemake.pid"
@@ -55,5 +103,10 @@ runs=$(find results/recipe -path '*/seed*' \( -name metrics.json -o -name scores
 [ -n "$runs" ] && tar czf "$out/recipe_runs.tgz" $runs
 echo "$(echo "$runs" | grep -c metrics.json) finished runs in $out/recipe_runs.tgz"
 [ -d results/recipe/report ] && cp -r results/recipe/report "$out/"
+if [ -f results/sim/dataset/manifest.json ]; then  # which Sim set these runs saw: compare across sessions
+  (cd results/sim/dataset && sha256sum manifest.json $(python3 -c "import json
+print(' '.join(json.load(open('manifest.json'))['trajectories']))") | sha256sum | cut -c1-16) > "$out/sim_fingerprint.txt"
+  echo "Sim set fingerprint $(cat "$out/sim_fingerprint.txt")"
+fi
 cp -r results/logs/recipe "$out/logs" 2>/dev/null
 exit $rc

@@ -27,6 +27,7 @@ from palpation.mapping.pipeline import TEST_DATASET, MapSettings, config_maps
 from palpation.mapping.uncertainty import ensemble_map
 from palpation.metrics.calibration import ece, positive_share
 from palpation.metrics.ensemble import coverage_curve, ensemble
+from palpation.model.recipe import SAME_TRAJECTORY
 from palpation.paths import REPO_ROOT
 from palpation.report.paper import CONFIG_TITLES
 from palpation.report.runs import recipe_root, run_dir
@@ -74,6 +75,31 @@ def row_groups(c: dict, config: str) -> list[tuple[str, str]]:
     return [(r, FULL) for r in c["recipes"]] + [("robust", s) for s in c["switches"] if config in switched]
 
 
+def trajectory_check(full: list[dict], runs: list[dict]) -> dict:
+    """Runs of a switch in SAME_TRAJECTORY against the full robust recipe's, seed by seed over the epochs both ran:
+    the largest differences of train loss (relative) and val FG IoU / AP. Near 0 says both jobs trained on the
+    same Sim set with the same code (a check across device sessions whose Sim set was rebuilt)."""
+    history = {r["seed"]: r["metrics"].get("history") or [] for r in full}
+    epochs, loss, diffs = 0, 0.0, {"val/fg_iou": 0.0, "val/ap": 0.0}
+    for r in runs:
+        for a, b in zip(history.get(r["seed"], []), r["metrics"].get("history") or []):
+            epochs += 1
+            loss = max(loss, abs(a["train/loss"] - b["train/loss"]) / abs(a["train/loss"]))
+            for k in diffs:
+                if k in a and k in b:
+                    diffs[k] = max(diffs[k], abs(a[k] - b[k]))
+    return {"epochs_compared": epochs, "max_rel_train_loss": loss, "max_abs_val_fg_iou": diffs["val/fg_iou"],
+            "max_abs_val_ap": diffs["val/ap"]}
+
+
+def kept_validation(metrics: dict) -> tuple[float, int]:
+    """(val AP, epoch) of the checkpoint a run kept, from its history (val AP is logged where the recipe selects by
+    it; nan otherwise): the validation-only evidence for choosing a recipe, never the test columns."""
+    history, best = metrics.get("history") or [], int(metrics.get("best_epoch", -1))
+    ap = history[best].get("val/ap", float("nan")) if 0 <= best < len(history) else float("nan")
+    return float(ap), best
+
+
 def group_row(config, recipe, switch, runs, maps, settings, layout) -> tuple[dict, list, dict]:
     """The ablation row of one (config, recipe, switch) over its seeds, their map stacks and scores."""
     aurocs = [r["metrics"]["test"]["auroc"] for r in runs]
@@ -92,6 +118,9 @@ def group_row(config, recipe, switch, runs, maps, settings, layout) -> tuple[dic
            "auroc_mean": float(np.mean(aurocs)), "auroc_std": sd(aurocs), "ap_mean": float(np.mean(aps)),
            "ap_std": sd(aps), "pos_share_05": float(np.mean(shares)), "ece": float(np.mean(eces)),
            "d_bar_mm": float(np.nanmean(d_bars))}
+    kept = [kept_validation(r["metrics"]) for r in runs]
+    row["val_ap_kept"] = float(np.mean([v for v, _ in kept]))  # recipe_report.json only: not a table column
+    row["kept_epochs"] = [e for _, e in kept]
     return row, stacks, scores
 
 
@@ -107,6 +136,7 @@ def run(cfg: DictConfig) -> dict:
                            sim_vessel_only=bool(maps["sim"]["vessel_only"]), **maps["threshold"])
     layout = silicone_layout(maps)[0] if any(TEST_DATASET[k] == "silicone" for k in c["experiments"]) else None
     rows, unc_rows, ens_maps, curves, panels, summary, left_out = [], [], {}, {}, {}, {}, []
+    full_robust, checks = {}, {}
     for config in c["experiments"]:
         title = f"{config} ({CONFIG_TITLES.get(config, config)})"
         for recipe, switch in row_groups(c, config):
@@ -117,6 +147,10 @@ def run(cfg: DictConfig) -> dict:
                 continue
             row, stacks, scores = group_row(config, recipe, switch, runs, maps, settings, layout)
             rows.append(row)
+            if recipe == "robust" and switch == FULL:
+                full_robust[config] = runs
+            elif recipe == "robust" and switch in SAME_TRAJECTORY and config in full_robust:
+                checks[f"{config}/robust-{switch}"] = trajectory_check(full_robust[config], runs)
             log.info("%s %s -%s: AP %.4f ± %.4f, positive at 0.5 %.1f %%, ECE %.4f, d-bar %.2f mm", config, recipe,
                      switch, row["ap_mean"], row["ap_std"], 100 * row["pos_share_05"], row["ece"], row["d_bar_mm"])
             if switch != FULL:
@@ -150,6 +184,19 @@ def run(cfg: DictConfig) -> dict:
              "means over seeds of the test scores as written (calibrated where the recipe calibrates); d̄ from each "
              "seed's vessel map at its SPEC §12 threshold (chosen on the test map, quirk 18), averaged.",
              "Calibration and early stopping use the training domain's validation split only."]
+    val_rows = [r for r in rows if r["val_ap_kept"] == r["val_ap_kept"]]
+    if val_rows:
+        notes.append("Validation AP of the kept checkpoints (the training domain's val split; what a recipe choice may "
+                     "read): " + "; ".join(f"{r['config']} {r['recipe']}"
+                                           f"{'' if r['switch_off'] == FULL else ' minus ' + r['switch_off']} "
+                                           f"{r['val_ap_kept']:.4f} (epochs {r['kept_epochs']})" for r in val_rows) + ".")
+    if checks:
+        worst = max(checks.values(), key=lambda v: v["max_abs_val_fg_iou"])
+        notes.append(f"Same training as the full robust recipe where a switch only changes where training stops or "
+                     f"how scores are rescaled ({', '.join(sorted(checks))}), epoch by epoch: train loss within "
+                     f"{max(v['max_rel_train_loss'] for v in checks.values()):.1e} (relative), val FG IoU within "
+                     f"{worst['max_abs_val_fg_iou']:.1e} over {sum(v['epochs_compared'] for v in checks.values())} "
+                     "seed-epochs (recipe_report.json `trajectory_checks`).")
     if left_out:
         notes.append(partial_note(left_out, c.get("partial_reason")))
     save_text(out / "recipe_ablation.md", recipe_ablation_markdown(table, c["profile"], notes))
@@ -160,6 +207,7 @@ def run(cfg: DictConfig) -> dict:
                 out / "uncertainty_maps")
     save_json(out / "recipe_report.json", {"profile": c["profile"], "rows": rows, "ensembles": summary,
                                            "partial": bool(c.get("partial")), "left_out": left_out,
+                                           "trajectory_checks": checks,
                                            "partial_reason": c.get("partial_reason")})
     if c.get("tracking"):
         _track(c, rows, out)

@@ -18,7 +18,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from palpation.config_check import app_main
 from palpation.io import csv_text, save_json, save_text
-from palpation.loop.slide_loop import COLUMNS, SlideLoopSettings, run_slide_loop
+from palpation.loop.slide_loop import COLUMNS, SearchSettings, SlideLoopSettings, run_slide_loop
 from palpation.loop.slides import frame_mae, frame_mae_abs, make_scene, replay
 from palpation.measured_sequences import SequenceSet, load_sequence_set
 from palpation.twin.config import TwinConfig
@@ -51,7 +51,11 @@ def run(cfg: DictConfig) -> dict:
     grid = OmegaConf.to_container(cfg.effects, resolve=True)
     settings = SlideLoopSettings(effects=grid, base=OmegaConf.to_container(cfg.base, resolve=True),
                                  max_rounds=int(cfg.max_rounds),
-                                 min_improvement_px=float(cfg.min_improvement_px)).validate()
+                                 min_improvement_px=float(cfg.min_improvement_px),
+                                 search=SearchSettings(**OmegaConf.to_container(cfg.search, resolve=True))).validate()
+    lead_in = float(cfg.lead_in_mm)
+    if lead_in < 0:
+        raise ValueError(f"conf/slide_loop.yaml: lead_in_mm = {lead_in} must be >= 0 (mm slid in before frame 0)")
     sset = load_sequence_set(cfg.sequences)
     sub, numbers = select(sset, cfg.trials, cfg.frames)
     mesh = SensorMesh.load(cfg.mesh) if cfg.mesh else cached_sensor_mesh(twin.mesh.resolution)
@@ -59,7 +63,7 @@ def run(cfg: DictConfig) -> dict:
     scene = make_scene(sset)
 
     def evaluate(part: SequenceSet, candidates: list[dict]):
-        return replay(mesh, twin, binding, part, scene, candidates, device=twin.device)
+        return replay(mesh, twin, binding, part, scene, candidates, device=twin.device, lead_in_mm=lead_in)
 
     start = time.perf_counter()
     result = run_slide_loop(evaluate, sub, settings, numbers)
@@ -74,7 +78,9 @@ def run(cfg: DictConfig) -> dict:
     save_text(cfg.out.csv, csv_text(result["rows"], COLUMNS, 4, na_rep="nan"))
     size = {"trials": numbers, "frames": list(cfg.frames) if cfg.frames is not None else [0, sset.n_frames],
             "mesh": twin.mesh.resolution, "device": str(twin.device)}
+    # the judge's replays (apps.twin_judge task=slides) read `replay` so that they replay exactly as the loop scored
     save_json(cfg.out.json, {"sequences": str(cfg.sequences), "size": size, "wall_s": wall, **result,
+                             "replay": {"lead_in_mm": lead_in},
                              "settings": dataclasses.asdict(settings)})
     log.info("slide loop: %d rows in %.0f s -> %s", len(result["rows"]), wall, cfg.out.csv)
     return result

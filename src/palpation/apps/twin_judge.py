@@ -22,7 +22,8 @@ from palpation.apps.slide_loop import select
 from palpation.config_check import app_main
 from palpation.io import csv_text, read_json, read_npz, save_json, save_npz, save_text
 from palpation.loop.folds import trial_folds
-from palpation.loop.slide_twins import heldout_trials, read_slide_loop, schedule_of, score, write_fold_twin
+from palpation.loop.slide_twins import (heldout_trials, read_slide_loop, scene_params, schedule_of, score,
+                                        write_fold_twin)
 from palpation.measured_sequences import load_sequence_set
 from palpation.metrics.scores import load_scores
 from palpation.report.markdown import markdown
@@ -51,12 +52,23 @@ def slides(cfg: DictConfig) -> dict:
     sub, _ = select(sset, scored, loop["size"]["frames"])
     mesh = SensorMesh.load(cfg.mesh) if cfg.mesh else cached_sensor_mesh(twin.mesh.resolution)
     binding = bind_markers(mesh.nodes, mesh.dome_nodes, sset.rest)
-    markers, failed = replay(mesh, twin, binding, sub, make_scene(sset), [schedule_of(twin)], device=twin.device)
+    lead_in = float(loop.get("replay", {}).get("lead_in_mm", 0.0))  # as the slide loop replayed (0: older json)
+    # each trial in the real scene as fitted by the fold that never saw it (its phantom slope), for every candidate
+    groups: dict[str, list[int]] = {}
+    for i, t in enumerate(scored):
+        groups.setdefault(next(f for f in loop["folds"] if t not in loop["folds"][f]), []).append(i)
+    markers = np.full((len(scored), sub.n_frames, len(sset.rest), 2), np.nan)
+    failed = np.zeros(len(scored), bool)
+    for f, idx in groups.items():
+        m, fl = replay(mesh, twin, binding, sub.subset(idx), make_scene(sset),
+                       [{**schedule_of(twin), **scene_params(loop, f)}], device=twin.device, lead_in_mm=lead_in)
+        markers[idx], failed[idx] = m[0], fl[0]
     out = {"twin": cfg.name, "fold": cfg.fold, "trials": scored, "fitted_trials": fitted,
-           "frames": loop["size"]["frames"], **score(markers[0], failed[0], sub)}
+           "frames": loop["size"]["frames"], "scene": {f: scene_params(loop, f) for f in groups},
+           **score(markers, failed, sub)}
     out["heldout_slide_mae_px"] = float(np.mean(out["mae_px"]))
     save_json(cfg.out.json, out)
-    save_npz(cfg.out.npz, markers=markers[0].astype(np.float32), trials=np.array(scored))
+    save_npz(cfg.out.npz, markers=markers.astype(np.float32), trials=np.array(scored))
     log.info("twin %s on Silicone trials %s: motion MAE %.3f px, vessel ratio sim %.3f / real %.3f",
              cfg.name, scored, out["heldout_slide_mae_px"], out["vessel_ratio_sim"], out["vessel_ratio_real"])
     return out
@@ -94,7 +106,8 @@ def table(cfg: DictConfig) -> dict:
     save_text(c["out"]["csv"], csv_text(df.to_dict("records"), COLUMNS, 4, na_rep="nan"))
     rows = [[str(r[k]).replace("|", "/") if not isinstance(r[k], float) else f"{r[k]:.3f}" for k in COLUMNS]
             for r in df.to_dict("records")]
-    save_text(c["out"]["md"], f"# Twin on the task ({c['profile']} profile)\n\n" + markdown(list(COLUMNS), rows))
+    note = f"Models: recipe {c['recipe']}, every candidate alike.\n\n" if c.get("recipe") else ""
+    save_text(c["out"]["md"], f"# Twin on the task ({c['profile']} profile)\n\n{note}" + markdown(list(COLUMNS), rows))
     chosen = str(df.loc[df["chosen"], "twin"].iloc[0])
     _figure(c, chosen, replays[chosen])
     log.info("twin selection: chosen %s -> %s", chosen, c["out"]["csv"])

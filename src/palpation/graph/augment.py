@@ -15,7 +15,7 @@ ROTATION_CENTRE_PX = (1040.0, 584.0)
 ROTATION_STEP_DEG = 60
 N_ROTATIONS = 6
 LABEL_RADIUS_PX = 30.0
-ROTATION_MODES = ("none", "reference", "consistent")
+ROTATION_MODES = ("none", "reference", "consistent", "lattice")  # lattice: palpation.graph.clips.ClipSet.gather
 
 
 def rotate_points(points: np.ndarray, angle_deg, centre=ROTATION_CENTRE_PX) -> np.ndarray:
@@ -47,7 +47,14 @@ def sim_labels(markers: np.ndarray, centreline: np.ndarray, contact: np.ndarray,
 
     markers (..., 127, 2), centreline (..., P, 2), contact (...,) -> int8 (..., 127).
     """
-    d2 = ((markers[..., :, None, :].astype(np.float64) - centreline[..., None, :, :]) ** 2).sum(-1)
+    # dx² + dy² per coordinate array is bit-identical to summing the squared (..., 2) differences (a length-2
+    # sum is one addition) and ~3x faster: it dominated building a training batch (stacked seeds wait on it)
+    m = np.asarray(markers, np.float64)
+    c = np.asarray(centreline, np.float64)
+    dx = m[..., :, None, 0] - c[..., None, :, 0]
+    dy = m[..., :, None, 1] - c[..., None, :, 1]
+    d2 = dx * dx
+    d2 += dy * dy
     near = d2.min(axis=-1) < radius_px ** 2
     return (near & np.asarray(contact, bool)[..., None]).astype(np.int8)
 

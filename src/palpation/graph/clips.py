@@ -58,13 +58,18 @@ class ClipSet:
         return np.clip(f, 0, len(self.seqs.markers[seq]) - 1)  # only `centred` windows reach past an end
 
     def gather(self, idx: np.ndarray, rotations: np.ndarray | None = None,
-               consistent: bool = False, scales: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+               consistent: bool = False, scales: np.ndarray | None = None,
+               lattice: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Clips `idx` -> markers (B, L, 127, 2) float32 px and labels (B, L, 127) int8.
 
         rotations: index 0..5 per clip (x 60 deg) or None. Sim labels are computed after rotating.
         consistent: renumber nodes so each sits at its rest site (quirk 14 fixed).
         scales: displacement-magnitude factor per clip or None: markers = rest + s (markers - rest),
         before the rotation, so Sim labels follow the scaled markers (a softer or deeper press).
+        lattice: rotate each marker's displacement from its rest site and move it to the site the rotation
+        takes it to (rest site + rotated displacement), labels carried with it. The rest layout is not
+        6-fold symmetric about the rotation centre (template: sites land 1.8-3.2 px off, up to 16 px), so
+        `consistent` adds that static offset to rotated clips only; `lattice` has none (issue 15).
         """
         idx = np.asarray(idx, dtype=np.int64)
         rot = np.zeros(len(idx), np.int64) if rotations is None else np.asarray(rotations, np.int64)
@@ -74,7 +79,9 @@ class ClipSet:
             m = self.seqs.markers[seq][f]
             if scales is not None:
                 m = (self.rest + scales[k] * (m - self.rest)).astype(np.float32)
-            if self.seqs.labels is not None:
+            if lattice:
+                m, lab = self._lattice_rotated(seq, f, m, r)
+            elif self.seqs.labels is not None:
                 lab = self.seqs.labels[seq][f]
                 if r:
                     m = rotate_points(m, ROTATION_STEP_DEG * r)
@@ -83,8 +90,21 @@ class ClipSet:
                 if r:
                     m, line = rotate_points(m, ROTATION_STEP_DEG * r), rotate_points(line, ROTATION_STEP_DEG * r)
                 lab = sim_labels(m, line, self.seqs.contact[seq][f])
-            if consistent and r:
+            if consistent and r and not lattice:
                 m, lab = m[:, self._perms[r]], lab[:, self._perms[r]]
             markers.append(m)
             labels.append(lab)
         return np.stack(markers).astype(np.float32), np.stack(labels).astype(np.int8)
+
+    def _lattice_rotated(self, seq: int, f: np.ndarray, m: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
+        """(`lattice` mode) markers rest_j + R(m_p(j) - rest_p(j)) and labels lab_p(j), p = the rotation's lattice
+        permutation; Sim labels from the unrotated clip (a marker's distance to the vessel does not rotate)."""
+        if self.seqs.labels is not None:
+            lab = self.seqs.labels[seq][f]
+        else:
+            lab = sim_labels(m, self.seqs.centreline[seq][f], self.seqs.contact[seq][f])
+        if not r:
+            return m, lab
+        perm = self._perms[r]
+        disp = rotate_points(m[:, perm] - self.rest[perm], ROTATION_STEP_DEG * r, centre=(0.0, 0.0))
+        return (self.rest + disp).astype(np.float32), lab[:, perm]

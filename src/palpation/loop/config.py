@@ -72,6 +72,12 @@ class LoopConfig:
     # null try, same budget, same twin batches); an effect must pass the gate against it too. Before the final
     # check, up to final_refit_iters Levenberg-Marquardt steps bring the final twin to its optimum (0 = off)
     null_try: bool = True
+    # a set that passes the gate does not end the round: smaller sets, and larger ones while the residual stays
+    # above the noise, may replace it (loop.compete); false = the first set that passes is kept
+    compete: bool = True
+    # every finish of a search that has the camera also starts from the camera's best other basin: a grid of
+    # principal points, f and rotation in closed form (loop.basins); false = the search's best trials only
+    camera_basins: bool = True
     final_refit_iters: int = 3
     # every try (the null try too) is finished by a bounded Levenberg-Marquardt solver after its search
     # (loop.polish): polish_iters iterations from its polish_starts best distinct trials (0 = off), so tries

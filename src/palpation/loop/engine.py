@@ -23,6 +23,8 @@ import numpy as np
 
 from palpation.calibration.objective import marker_mae_px
 from palpation.loop.attribution import Signature, attribute, fit_subset, joint_candidates
+from palpation.loop.basins import camera_starts, nominal_steps
+from palpation.loop.compete import Winner, enter
 from palpation.loop.config import LoopConfig
 from palpation.loop.effects import EFFECTS, PARAMS, Dof, bounds, clip, move
 from palpation.loop.gate import decide, heldout_z
@@ -64,6 +66,7 @@ class Problem:
     final: dict | None = None  # loop.unexplained.final_check of the final twin
     reference_attribution: dict | None = None  # real mode: attribution at the starting twin (loop.real)
     starts: list[dict] = field(default_factory=list)  # the last kept try's best distinct trials (final refit)
+    noise_px: float | None = None  # detector noise per coordinate (loop.compete: a residual at the noise level)
 
     def fit_targets(self) -> list[Target]:
         return [t for t in self.targets if t.fit]
@@ -263,6 +266,7 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                 p.rounds.append(_record(k, p, None, att, before[p.name], None, accepted=False))
                 log.info("loop '%s' round %d: no effect explains the residual (BIC); stop", p.name, k)
         nulls: dict[str, tuple] = {}  # per problem: the null try's (summary, markers, fit), or None if it diverged
+        winners: dict[str, Winner] = {}  # per problem: the round's best set so far (loop.compete)
         for attempt in range(max((len(q) for q in queue.values()), default=0)):
             trying = [p for p in active if not p.done and len(queue[p.name]) > attempt]
             if not trying:
@@ -287,7 +291,9 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                                progress=progress)
             for p in [*trying, *extra]:
                 p.params.update(fits[p.name]["params"])
-            finish(cfg, [*trying, *extra], fits, simulate)  # every try (null too) at its local optimum
+            # every try (null too) at its local optimum; a try that adds the camera also from its best other basin
+            finish(cfg, [*trying, *extra], fits, simulate,
+                   {p.name for p in trying if "camera" in queue[p.name][attempt]["effects"]})
             diverged = evaluate([*trying, *extra], simulate, strict=False)
             for q in extra:  # a diverged null try leaves the previous twin as the only reference
                 nulls[q.name[:-len(NULL)]] = None if q.name in diverged else (q.summary(), q.markers, fits[q.name])
@@ -321,18 +327,22 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                         why = f"{why}; but not beyond re-fitting alone (null try: {why0})"
                     ok = ok and ok0
                     after["gate"]["why"] = why
-                p.rounds.append(_record(k, p, item, att, before[p.name], after, ok))
+                rec = _record(k, p, item, att, before[p.name], after, ok)
+                rec["passed"] = ok  # the gate's own verdict; `accepted`: kept after the round's competition
+                p.rounds.append(rec)
+                if ok:
+                    ok = enter(cfg, p, queue, attempt, winners, item, rec, a, fits[p.name]["starts"])
                 log.info("loop '%s' round %d try %d: %s explains %.1f %% of the residual; MAE fit %.2f -> %.2f "
                          "px; %s: %s", p.name, k, attempt + 1, "+".join(item["effects"]), 100 * item["share"],
-                         b["fit"], a["fit"], why, "kept" if ok else "rejected")
-                if ok:
-                    for e in item["effects"]:
-                        p.effects.append(e)
-                        p.candidates.remove(e)
-                    p.starts = fits[p.name]["starts"]  # the final refit's other starts (loop.refit.converge)
-                    queue[p.name] = []  # this round is done
-                else:  # the gate refused: restore the previous twin
-                    p.params, p.markers, p.searched = dict(b_params), b_markers, list(b_searched)
+                         b["fit"], a["fit"], rec["after"]["gate"]["why"], "kept" if ok else "rejected")
+                # the next try starts from the round's twin; the winner is applied when the round ends
+                p.params, p.markers, p.searched = dict(b_params), b_markers, list(b_searched)
+        for name, w in winners.items():
+            p = next(q for q in active if q.name == name)
+            p.params, p.markers, p.searched, p.starts = dict(w.params), w.markers, list(w.searched), w.starts
+            for e in w.effects:
+                p.effects.append(e)
+                p.candidates.remove(e)
         for p in active:
             if not p.done and not any(r["round"] == k and r["accepted"] for r in p.rounds):
                 p.done = True  # every try of this round was rejected
@@ -342,16 +352,21 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
     rounds.close()
 
 
-def finish(cfg: LoopConfig, problems: list[Problem], fits: dict[str, dict], simulate) -> None:
-    """The local least-squares finish of each problem's search (loop.polish), from its best distinct trials;
-    fits[name] gains `polish` (fitted MAE before/after), `params_final` and `starts` (the next-best distinct
-    trials the final refit also starts from) in place of the search's ranked trials."""
+def finish(cfg: LoopConfig, problems: list[Problem], fits: dict[str, dict], simulate, basins=()) -> None:
+    """The local least-squares finish of each problem's search (loop.polish), from its best distinct trials
+    (and, for the problems named in `basins`, the camera's best other basin: loop.basins); fits[name] gains
+    `polish` (fitted MAE before/after), `params_final` and `starts` (the next-best distinct trials the final
+    refit also starts from) in place of the search's ranked trials."""
     limits = {p.name: {**cfg.search.bounds, **p.trust} for p in problems}
     starts = {p.name: distinct_starts(fits[p.name].pop("ranked"), p.searched, limits[p.name],
                                       max(cfg.polish_starts, cfg.final_refit_starts)) for p in problems}
+    grid = camera_starts([p for p in problems if p.name in basins], simulate, limits, nominal_steps(cfg.steps)) \
+        if cfg.camera_basins else {}
+    for name, s in grid.items():  # the camera's best other basin as one more start (loop.basins)
+        starts[name] = [*starts[name][:cfg.polish_starts], s, *starts[name][cfg.polish_starts:]]
     if cfg.polish_iters > 0:
-        done = polish(problems, {n: s[:cfg.polish_starts] for n, s in starts.items()}, simulate, limits,
-                      cfg.polish_iters)
+        done = polish(problems, {n: s[:cfg.polish_starts + (n in grid)] for n, s in starts.items()}, simulate,
+                      limits, cfg.polish_iters)
         log.info("local finish of %d tries: %d twin jobs; fitted MAE %.3f -> %.3f px (mean)", len(problems),
                  next(iter(done.values()))["jobs_all"] if done else 0,
                  np.nanmean([d.get("fit_start", np.nan) for d in done.values()]),

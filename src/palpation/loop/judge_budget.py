@@ -26,18 +26,27 @@ from palpation.paths import REPO_ROOT
 
 REPLAY_FACTOR = 1.3
 SIM_FRAMES = 398  # frames of a Sim-set slide (SPEC §7), the bench's schedule
+# The slide loop's measured rate on the H100 (paper run of 25 Nov, docs/results/paper/loop_slides/slide_loop.json:
+# 172 s for 390 env replays of 495 frames in 8 batches, beside the loop self-test): s per env-frame, batch overhead
+# of 2 ms a frame taken off. The bench model above prices the same work at ~1/3 of it; both are printed.
+MEASURED_S_PER_ENV_FRAME = (172.0 - 8 * 495 * 2.0e-3) / (390 * 495)
+# A robust-recipe Sim job (5 seeds together, A-to-B + A-to-C scored) on the H100: 187 s beside three other Sim
+# jobs (docs/recipe.md, "Device time"); ~20 s an epoch alone, ~41 s when four Sim jobs share the card.
+ROBUST_SIM_JOB_S = 187.0
 
 
-def slide_loop_envs(candidates: dict[str, int], n_fit: int, n_held: int, max_rounds: int) -> list[int]:
+def slide_loop_envs(candidates: dict[str, int], n_fit: int, n_held: int, max_rounds: int,
+                    batches: int = 1) -> list[int]:
     """Env counts of one fold's twin batches in the worst case (every round keeps an effect, the one with the
-    fewest candidates, so the later rounds stay largest): round 0 fit and held-out, then per round the
-    remaining candidates x the fitted trials and the held-out replay of the kept twin."""
+    fewest candidates, so the later rounds stay largest): round 0 fit and held-out, then per round `batches`
+    sequential batches of the remaining candidates x the fitted trials (grid: 1 batch of every value; tpe:
+    `search.batches` of `search.per_batch` asks per effect) and the held-out replay of the kept twin."""
     left = dict(candidates)
     envs = [n_fit, n_held]
     for _ in range(max_rounds):
         if not left:
             break
-        envs.append(sum(left.values()) * n_fit)
+        envs += [sum(left.values()) * n_fit] * batches
         left.pop(min(left, key=left.get))
         envs.append(n_held)
     return envs
@@ -74,10 +83,16 @@ def slide_work(profile: dict, sequences: str, mesh: str | None) -> dict:
     sset = load_sequence_set(sequences)
     sub, numbers = select(sset, cfg.trials, cfg.frames)
     m = SensorMesh.load(mesh) if mesh else cached_sensor_mesh(profile["twin_resolution"])
-    frames = max(len(plan_replay(p, make_scene(sset), tip_node_B(m))[0].T_BA) for p in sub.pose_mm)
+    lead = float(cfg.get("lead_in_mm", 0.0))
+    frames = max(len(plan_replay(p, make_scene(sset), tip_node_B(m), lead_in_mm=lead)[0].T_BA) for p in sub.pose_mm)
     folds = trial_folds(numbers)
-    cands = {e: len(next(iter(g.values()))) for e, g in cfg.effects.items()}
+    search = cfg.get("search") or {"sampler": "grid"}
+    if search["sampler"] == "grid":
+        cands, batches = {e: len(next(iter(g.values()))) for e, g in cfg.effects.items()}, 1
+    else:  # tpe: per round `batches` sequential batches of `per_batch` asks per remaining effect
+        cands, batches = {e: int(search["per_batch"]) for e in cfg.effects}, int(search["batches"])
     return {"trials": numbers, "measured_frames": sub.n_frames, "replay_frames": frames, "candidates": cands,
+            "batches": batches, "sampler": search["sampler"], "lead_in_mm": lead,
             "max_rounds": int(cfg.max_rounds), "fold_sizes": [len(v) for v in folds.values()]}
 
 
@@ -95,6 +110,7 @@ def budget(profile: str, sequences: str, mesh: str | None = None) -> dict:
     train = json.loads((docs / "bench_train.json").read_text())["wall_s"]
     seeds = len(profile["judge"]["seeds"])
     together = bool(profile["train"].get("seeds_together"))
+    recipe = profile["judge"].get("recipe") or profile["train"]["recipe"]
     work = slide_work(profile, sequences, mesh)
     f = work["replay_frames"]
 
@@ -102,25 +118,33 @@ def budget(profile: str, sequences: str, mesh: str | None = None) -> dict:
         return REPLAY_FACTOR * f * (a + b * envs)
 
     n_fit, n_held = work["fold_sizes"]
-    loop_envs = [slide_loop_envs(work["candidates"], *sizes, work["max_rounds"])
+    loop_envs = [slide_loop_envs(work["candidates"], *sizes, work["max_rounds"], work["batches"])
                  for sizes in ((n_fit, n_held), (n_held, n_fit))]
+    env_frames = f * sum(map(sum, loop_envs))
+    measured_loop = f * a * sum(map(len, loop_envs)) + env_frames * MEASURED_S_PER_ENV_FRAME
     sim_set = SIM_FRAMES * (a + b * 2 * profile["dataset"]["n_pairs"])
-    per_job = train["together"] * seeds / 5 if together else train["apart"] / 5  # bench: 5 seeds
-    train_jobs = 4 * 2 * (1 if together else seeds)  # (photo_loop, calibrated, 2 fold twins) x A-to-B/A-to-C
+    if recipe == "robust":  # measured per job (5 seeds together); apart: x 2.2 as the reference bench
+        per_job = ROBUST_SIM_JOB_S * seeds / 5 * (1 if together else train["apart"] / train["together"] / seeds)
+    else:
+        per_job = train["together"] * seeds / 5 if together else train["apart"] / 5  # bench: 5 seeds
+    # (photo_loop, calibrated, 2 fold twins); seeds together: A-to-B trained once, A-to-C scored by its models
+    train_jobs = 4 * (1 if together else 2 * seeds)
     rows = [
         ("slide_loop (both folds, worst case)", 1, sum(replay(n) for envs in loop_envs for n in envs),
-         f"{sum(map(len, loop_envs))} batches, envs {loop_envs}, {f} frames"),
+         f"{sum(map(len, loop_envs))} batches, envs {loop_envs}, {f} frames; at the last paper run's measured "
+         f"rate {measured_loop:.0f} s"),
         ("judge_slides replays", 4, np.mean([replay(len(work["trials"]))] * 2 + [replay(n_fit), replay(n_held)]),
          "1 twin x its held-out trials"),
         ("Sim sets (2 upstream + 2 fold twins)", 4, measured.get("simulate_dataset", sim_set),
          f"{2 * profile['dataset']['n_pairs']} slides; kernel time alone {sim_set:.0f} s"),
-        ("training jobs", train_jobs, per_job, f"{seeds} seeds {'together' if together else 'apart'}"),
+        ("training jobs", train_jobs, per_job, f"recipe {recipe}, {seeds} seeds {'together' if together else 'apart'}"),
         ("calibrate + loop (upstream)", 1, measured.get("calibrate", 0) + measured.get("loop", 0), "paper run"),
     ]
     path = {"photo twins": measured.get("calibrate", 0) + measured.get("loop", 0) + rows[2][2] + rows[3][2],
             "slide twins": measured.get("silicone_set", 0) + rows[0][2] + rows[2][2] + rows[3][2]}
+    path["slide twins, measured loop rate"] = path["slide twins"] - rows[0][2] + measured_loop
     return {"profile": profile_name, "work": work, "rows": rows, "job_s": sum(r[1] * r[2] for r in rows),
-            "critical_path_s": path, "twin_s_per_frame": [a, b]}
+            "critical_path_s": path, "twin_s_per_frame": [a, b], "slide_loop_measured_rate_s": measured_loop}
 
 
 def main() -> None:
@@ -129,9 +153,10 @@ def main() -> None:
     p.add_argument("--sequences", default="results/data/silicone/silicone_sequences")
     p.add_argument("--mesh", default=None, help="mesh npz (default: the cached mesh of the profile's resolution)")
     r = budget(**vars(p.parse_args()))
-    print(f"{r['profile']} profile: slide loop on trials {r['work']['trials']}, {r['work']['measured_frames']} "
-          f"measured frames = {r['work']['replay_frames']} twin frames per replay, candidates "
-          f"{r['work']['candidates']}, <= {r['work']['max_rounds']} rounds")
+    w = r["work"]
+    print(f"{r['profile']} profile: slide loop on trials {w['trials']}, {w['measured_frames']} measured frames = "
+          f"{w['replay_frames']} twin frames per replay (lead-in {w['lead_in_mm']:g} mm), search {w['sampler']}: "
+          f"{w['batches']} batch(es) of {w['candidates']} per round, <= {w['max_rounds']} rounds")
     for name, count, each, note in r["rows"]:
         print(f"  {name:40s} {count:3d} x {each:6.1f} s = {count * each:7.1f} s   ({note})")
     print(f"  job time {r['job_s']:.0f} s; dependency chains " +

@@ -98,8 +98,9 @@ def run_loop(mset: MeasuredSet, source: str, cfg: LoopConfig, simulate, base: Ma
     round_zero([p], simulate, cfg, db_path, tkey, progress)
     if on_round is not None:
         on_round(0, [p])
-    run_rounds([p], simulate, cfg, db_path, tkey, cfg.max_rounds, on_round, progress)
     sigma, where = noise_estimate(mset, cfg.noise_px)
+    p.noise_px = sigma  # a set at this noise level leaves nothing for a larger effect set (loop.compete)
+    run_rounds([p], simulate, cfg, db_path, tkey, cfg.max_rounds, on_round, progress)
     check_all([p], simulate, cfg, {p.name: sigma})
     p.final["noise_source"] = where
     return p

@@ -122,6 +122,11 @@ def verdict_lines(p: Problem, meta: Mapping) -> list[str]:
                  f"keeps {'+'.join(ref['best_subset']) or 'nothing'} ({ref['best_subset_share']:.0%}), on the round-0 "
                  f"twin {'+'.join(first['best_subset']) or 'nothing'} ({first['best_subset_share']:.0%})"
                  + ("." if same else ": they differ, so the round-0 stiffness absorbed part of a signature."))
+    ties = [f"{r['effect']} ~ {' ~ '.join(r['indistinguishable'])} (round {r['round']})" for r in kept
+            if r.get("indistinguishable")]
+    if ties:
+        L.append("* Indistinguishable on these states (neither passes the gate against the other; the smaller set "
+                 "is kept, loop.compete): " + "; ".join(ties) + ".")
     nulled = [r for r in p.rounds if "not beyond re-fitting" in ((r.get("after") or {}).get("gate") or {}).get("why", "")]
     if nulled:
         L.append("* Refused because re-fitting the current parameters alone (the null try) did as well: "
@@ -256,9 +261,10 @@ def selftest_markdown(rows: list[dict], table: Mapping[str, Mapping[str, int]], 
          f"{summ['out_of_list_runs']} (aim >= 80 %)",
          f"* in-list runs reported `unexplained`: **{summ['in_list_unexplained']}** (aim 0)",
          f"* gate over {summ['gate_tries']} tries: false accept {pct(summ['gate_false_accept'])} (an effect set not "
-         f"all injected kept), false reject {pct(summ['gate_false_reject'])} (an injected subset refused); refused "
+         f"all injected passed), false reject {pct(summ['gate_false_reject'])} (an injected subset refused); refused "
          f"because re-fitting alone did as well (null try): {summ.get('null_refused_wrong', 0)} wrong, "
-         f"{summ.get('null_refused_right', 0)} injected", "",
+         f"{summ.get('null_refused_right', 0)} injected; passed the gate but lost the round's competition "
+         f"(loop.compete): {summ.get('replaced', 0)}", "",
          "## Confusion (rows named, columns injected; a run counts in every pair of its sets)", "",
          "| named \\ injected | " + " | ".join(cols) + " |", "|---" * (len(cols) + 1) + "|"]
     for n, counts in table.items():

@@ -167,7 +167,7 @@ def run_selftest(cfg: LoopConfig, simulate, base: Mapping[str, float], template:
         p = make_problem(mset, str(path), cfg, {}, name=f"run{inj.run:03d}", holdout=cfg.selftest.holdout,
                          states=cfg.selftest.states, effects_on=on, candidates=cfg.effects)
         p.params = dict(start)
-        sigmas[p.name] = noise_estimate(mset, cfg.noise_px)[0]
+        sigmas[p.name] = p.noise_px = noise_estimate(mset, cfg.noise_px)[0]
         problems.append(p)
     evaluate(problems, simulate)
     before = [p.summary() for p in problems]
@@ -185,6 +185,11 @@ def run_selftest(cfg: LoopConfig, simulate, base: Mapping[str, float], template:
                      "injected_effects": inj.effects, "unlisted": inj.unlisted, "named": added,
                      "unexplained": unexplained, "strengths": inj.strengths, "betas": inj.betas,
                      "tries": [{"round": r["round"], "effects": r.get("effects", []), "accepted": r["accepted"],
+                                "passed": r.get("passed", r["accepted"]),
+                                "indistinguishable": r.get("indistinguishable", []),
+                                "fit_px": (r.get("after") or {}).get("fit"),
+                                "heldout_px": (r.get("after") or {}).get("heldout"),
+                                "why": ((r.get("after") or {}).get("gate") or {}).get("why", ""),
                                 "null_refused": "not beyond re-fitting" in ((r.get("after") or {}).get("gate") or {})
                                 .get("why", "")} for r in p.rounds],
                      "injected": {k: inj.params[k] for e in inj.effects for k in EFFECTS[e].params},
@@ -222,8 +227,10 @@ def summary(rows: list[dict]) -> dict:
             "mae_cut_mean": float(np.mean(cut)) if cut else nan,
             "out_of_list_unexplained": float(np.mean([r["unexplained"] for r in out])) if out else nan,
             "in_list_unexplained": int(sum(r["unexplained"] for r in inl)),
-            "gate_false_accept": float(np.mean([t["accepted"] for t in wrong])) if wrong else nan,
-            "gate_false_reject": float(np.mean([not t["accepted"] for t in right])) if right else nan,
+            # the gate's own verdict (`passed`); a passed set may still lose the round's competition (loop.compete)
+            "gate_false_accept": float(np.mean([t.get("passed", t["accepted"]) for t in wrong])) if wrong else nan,
+            "gate_false_reject": float(np.mean([not t.get("passed", t["accepted"]) for t in right])) if right else nan,
+            "replaced": int(sum(t.get("passed", False) and not t["accepted"] for t, _ in tries)),
             "gate_tries": len(tries),
             # refused only because the null try (re-fitting without the effect) did as well (loop.refit)
             "null_refused_wrong": int(sum(t.get("null_refused", False) for t in wrong)),

@@ -1,11 +1,16 @@
 """The residual loop on measured slides (issue 12): per fold, add the candidate effect that lowers the
 per-frame marker MAE on the fold's trials most, round by round, and score each round on the other fold.
 
-An effect is a grid of values of registry parameters (conf/slide_loop.yaml `effects`): lists of one
-effect move together (value i of every list is candidate i). A round evaluates every remaining effect's
-candidates on the fitted trials in one twin batch, keeps the best if it lowers the fitted MAE by at least
-`min_improvement_px`, then replays the kept twin on the held-out trials. Which effect is chosen uses the
-fitted trials only; the held-out trials and the labels only score.
+An effect is a set of registry parameters (conf/slide_loop.yaml `effects`). A round searches every remaining
+effect's parameters on the fitted trials and keeps the best effect if it lowers the fitted MAE by at least
+`min_improvement_px`, then replays the kept twin on the held-out trials. Two searches (`search.sampler`):
+* `tpe` (default): a continuous search within each parameter's physical bounds (palpation.twin.parameters,
+  log-scaled where the registry says), one seeded Optuna TPE study per effect and round; `search.batches`
+  sequential twin batches, each holding `search.per_batch` asks of every remaining effect (all effects of a
+  batch in one twin call); the first batch tries the effect's first `per_batch` listed values (then random
+  starts if it lists fewer), the later ones are TPE's;
+* `grid`: the effects' value lists (value i of every list of one effect is candidate i), one twin batch.
+Which effect and value are chosen uses the fitted trials only; the held-out trials and the labels only score.
 """
 
 from __future__ import annotations
@@ -15,17 +20,33 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
+import optuna
 
 from palpation.loop.folds import other, trial_folds
-from palpation.loop.slides import SCHEDULE_KEYS, frame_mae, frame_mae_abs, slide_modes, vessel_ratio
+from palpation.loop.slides import SCENE_PARAMETERS, SCHEDULE_KEYS, frame_mae, frame_mae_abs, slide_modes, vessel_ratio
 from palpation.measured_sequences import SequenceSet
 from palpation.twin.parameters import PARAMETERS
 
 log = logging.getLogger(__name__)
 # mae_*: marker motion about each trial's median (loop.slides.frame_mae); mae_abs_heldout_px: the absolute error
+# at_bounds: the kept parameters at a physical bound ("; "-joined), a symptom (slide_loop.at_bounds)
 COLUMNS = ("fold", "round", "effect_added", "mae_fit_px", "mae_heldout_px", "vessel_ratio_sim", "vessel_ratio_real",
-           "mae_abs_heldout_px")
+           "mae_abs_heldout_px", "at_bounds")
 Evaluate = Callable[[SequenceSet, list[dict]], tuple[np.ndarray, np.ndarray]]  # -> markers (C,T,F,127,2), failed (C,T)
+SAMPLERS = ("tpe", "grid")
+
+
+def bounds_of(name: str):
+    """The search range of a slide-loop parameter: the twin's registry, else the real scene's (loop.slides)."""
+    return PARAMETERS.get(name) or SCENE_PARAMETERS[name]
+
+
+@dataclass
+class SearchSettings:
+    sampler: str = "tpe"
+    batches: int = 3  # sequential twin batches per round (tpe)
+    per_batch: int = 3  # asks per effect and batch (tpe)
+    seed: int = 0
 
 
 @dataclass
@@ -34,6 +55,7 @@ class SlideLoopSettings:
     base: dict[str, float] = field(default_factory=dict)
     max_rounds: int = 3
     min_improvement_px: float = 0.05
+    search: SearchSettings = field(default_factory=SearchSettings)
 
     def validate(self, where: str = "conf/slide_loop.yaml") -> "SlideLoopSettings":
         known = {p.name for p in PARAMETERS.values() if p.per_env} | set(SCHEDULE_KEYS)
@@ -47,12 +69,17 @@ class SlideLoopSettings:
                 raise ValueError(f"{where}: effects.{effect} needs value lists of one common, non-zero length "
                                  f"(candidate i takes value i of each), got {({k: len(v) for k, v in grid.items()})}")
             for name, values in grid.items():
-                p = PARAMETERS[name]
+                p = bounds_of(name)
                 if not p.low <= min(values) <= max(values) <= p.high:
                     raise ValueError(f"{where}: effects.{effect}.{name} = {list(values)} leaves its physical bounds "
-                                     f"[{p.low:g}, {p.high:g}] {p.unit} ({p.why}; palpation/twin/parameters.py)")
+                                     f"[{p.low:g}, {p.high:g}] {p.unit} ({p.why}; palpation/twin/parameters.py, "
+                                     "loop/slides.py SCENE_PARAMETERS)")
         if self.max_rounds < 0 or self.min_improvement_px < 0:
             raise ValueError(f"{where}: need max_rounds >= 0 and min_improvement_px >= 0")
+        s = self.search
+        if s.sampler not in SAMPLERS or s.batches < 1 or s.per_batch < 1:
+            raise ValueError(f"{where}: search.sampler must be one of {SAMPLERS} with search.batches >= 1 and "
+                             f"search.per_batch >= 1, got {s}")
         return self
 
 
@@ -68,6 +95,58 @@ def _score(evaluate: Evaluate, sset: SequenceSet, cands: list[dict]) -> tuple[np
     return markers, mae.mean(axis=1)
 
 
+def at_bounds(params: dict, rel: float = 0.02) -> list[str]:
+    """Parameters within `rel` of their search width (log width for log-scaled ones) of a registry bound: a
+    symptom that the fit wants more than the physical range allows (docs/loop.md "Slides")."""
+    out = []
+    for name, value in params.items():
+        p = PARAMETERS.get(name) or SCENE_PARAMETERS.get(name)
+        if p is None or p.high <= p.low:
+            continue
+        lo, hi, x = (np.log(p.low), np.log(p.high), np.log(value)) if p.log and p.low > 0 and value > 0 else \
+            (p.low, p.high, value)
+        if min(x - lo, hi - x) <= rel * (hi - lo):
+            out.append(f"{name}={value:g} at its {'lower' if x - lo <= hi - x else 'upper'} bound "
+                       f"[{p.low:g}, {p.high:g}] {p.unit}")
+    return out
+
+
+def _round_grid(score, current: dict, remaining: list[str], settings: SlideLoopSettings):
+    cands, owners = [], []
+    for effect in remaining:
+        for c in candidates_of(settings.effects[effect]):
+            cands.append({**current, **c})
+            owners.append(effect)
+    return cands, owners, (score(cands) if cands else np.zeros(0))
+
+
+def _round_tpe(score, current: dict, remaining: list[str], settings: SlideLoopSettings, seed: int):
+    """Every remaining effect's parameters searched in [low, high] (registry), `batches` x `per_batch` asks."""
+    s = settings.search
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    studies = {e: optuna.create_study(sampler=optuna.samplers.TPESampler(
+        seed=seed + 7919 * i, n_startup_trials=s.per_batch, multivariate=True)) for i, e in enumerate(remaining)}
+    for effect in remaining:  # the first batch starts from the effect's listed values, the rest is the sampler's
+        for c in candidates_of(settings.effects[effect])[:s.per_batch]:
+            studies[effect].enqueue_trial(c)
+    cands, owners, maes = [], [], []
+    for _ in range(s.batches):
+        asked = []
+        for effect in remaining:
+            for _ in range(s.per_batch):
+                trial = studies[effect].ask()
+                c = {n: trial.suggest_float(n, bounds_of(n).low, bounds_of(n).high, log=bounds_of(n).log)
+                     for n in settings.effects[effect]}
+                asked.append((effect, trial))
+                cands.append({**current, **c})
+                owners.append(effect)
+        mae = score(cands[-len(asked):])
+        for (effect, trial), m in zip(asked, mae):
+            studies[effect].tell(trial, float(m) if np.isfinite(m) else 1e9)
+        maes.append(mae)
+    return cands, owners, np.concatenate(maes) if maes else np.zeros(0)
+
+
 def run_fold(evaluate: Evaluate, fit: SequenceSet, held: SequenceSet, settings: SlideLoopSettings,
              fold: str) -> tuple[list[dict], list[dict]]:
     """Rows of one fold (round 0 = the base twin) and the parameters after each round."""
@@ -79,24 +158,29 @@ def run_fold(evaluate: Evaluate, fit: SequenceSet, held: SequenceSet, settings: 
         r = {"fold": fold, "round": k, "effect_added": effect, "mae_fit_px": float(mae_fit),
              "mae_heldout_px": float(mae_held[0]), "vessel_ratio_sim": vessel_ratio(m_held[0], held.labels),
              "vessel_ratio_real": real_ratio, "modes_heldout": slide_modes(m_held[0], held),
-             "mae_abs_heldout_px": float(frame_mae_abs(m_held[0], held).mean())}
+             "mae_abs_heldout_px": float(frame_mae_abs(m_held[0], held).mean()),
+             "at_bounds": "; ".join(at_bounds({n: current[n] for n in searched}))}
         log.info("fold %s round %d (%s): motion MAE fit %.3f px, held-out %.3f px (absolute %.3f px), "
-                 "vessel ratio sim %.3f / real %.3f", fold, k, effect, r["mae_fit_px"], r["mae_heldout_px"],
-                 r["mae_abs_heldout_px"], r["vessel_ratio_sim"], real_ratio)
+                 "vessel ratio sim %.3f / real %.3f%s", fold, k, effect, r["mae_fit_px"], r["mae_heldout_px"],
+                 r["mae_abs_heldout_px"], r["vessel_ratio_sim"], real_ratio,
+                 f"; SYMPTOM {r['at_bounds']}" if r["at_bounds"] else "")
         return r
 
+    def score(cands: list[dict]) -> np.ndarray:
+        return _score(evaluate, fit, cands)[1]
+
     _, mae0 = _score(evaluate, fit, [current])
+    searched: list[str] = []  # the kept effects' parameters (a base value switched off is no symptom)
     rows, params = [row(0, "none", mae0[0])], [dict(current)]
     remaining = list(settings.effects)
     for k in range(1, settings.max_rounds + 1):
-        cands, owners = [], []
-        for effect in remaining:
-            for c in candidates_of(settings.effects[effect]):
-                cands.append({**current, **c})
-                owners.append(effect)
-        if not cands:
+        if not remaining:
             break
-        _, mae = _score(evaluate, fit, cands)
+        if settings.search.sampler == "grid":
+            cands, owners, mae = _round_grid(score, current, remaining, settings)
+        else:  # a fold's seed differs from the other's and every round's from the last
+            seed = settings.search.seed + 1000 * k + (0 if fold == "odd" else 500)
+            cands, owners, mae = _round_tpe(score, current, remaining, settings, seed)
         best = int(np.argmin(mae))
         if not mae[best] < rows[-1]["mae_fit_px"] - settings.min_improvement_px:
             log.info("fold %s round %d: no effect lowers the fitted MAE by %.3f px (best %s %.3f); stop",
@@ -104,6 +188,7 @@ def run_fold(evaluate: Evaluate, fit: SequenceSet, held: SequenceSet, settings: 
             break
         current = cands[best]
         remaining.remove(owners[best])
+        searched += list(settings.effects[owners[best]])
         rows.append(row(k, owners[best], mae[best]))
         params.append(dict(current))
     return rows, params

@@ -17,7 +17,7 @@ import yaml
 
 from palpation.io import read_json, save_text
 from palpation.loop.folds import FOLDS, other
-from palpation.loop.slides import SCHEDULE_KEYS, frame_mae, vessel_ratio
+from palpation.loop.slides import SCENE_PARAMETERS, SCHEDULE_KEYS, frame_mae, vessel_ratio
 from palpation.twin.config import TwinConfig
 from palpation.twin.parameters import PARAMETERS
 
@@ -32,10 +32,18 @@ def read_slide_loop(path: str | Path) -> dict:
 
 
 def fold_params(loop: dict, fold: str) -> dict[str, float]:
-    """The fold's parameters after its last kept round (registry names)."""
+    """The fold's twin parameters after its last kept round (registry names; the scene's are scene_params')."""
     if fold not in FOLDS:
         raise ValueError(f"unknown fold '{fold}'; use one of {FOLDS}")
-    return {k: float(v) for k, v in loop["params"][fold][-1].items()}
+    return {k: float(v) for k, v in loop["params"][fold][-1].items() if k not in SCENE_PARAMETERS}
+
+
+def scene_params(loop: dict, fold: str | None) -> dict[str, float]:
+    """The real scene as fold `fold` fitted it (its phantom slope; {} for no fold): every candidate twin is
+    replayed on a trial in the scene fitted on the other fold's trials, as the slide loop scored it."""
+    if fold is None:
+        return {}
+    return {k: float(v) for k, v in loop["params"][fold][-1].items() if k in SCENE_PARAMETERS}
 
 
 def twin_overrides(params: dict[str, float]) -> dict[str, dict]:
@@ -60,7 +68,7 @@ def write_fold_twin(loop: dict, fold: str, path: str | Path, source: str) -> dic
 
 def schedule_of(cfg: TwinConfig) -> dict[str, float]:
     """The twin's mount depth offset and marker anchor as the replay's schedule values (registry units)."""
-    return {k: PARAMETERS[k].default(cfg) for k in SCHEDULE_KEYS}
+    return {k: PARAMETERS[k].default(cfg) for k in SCHEDULE_KEYS if k in PARAMETERS}
 
 
 def heldout_trials(loop: dict, fold: str | None) -> tuple[list[int], list[int]]:

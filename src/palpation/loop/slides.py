@@ -32,9 +32,30 @@ from palpation.twin.trajectory import (APPROACH_Z_M, BASE_ROTATION, CENTRE_XY_M,
                                        PHANTOM_TOP_M, REACH_TOL_M, SPEED_CAP_M_S, Trajectory, padded_schedule,
                                        pose_matrix)
 
-# registry parameters the replay applies outside the kernels: to the poses (mount dz) or to the projected
-# markers (anchor: that fraction of the rest offset template - bound rest, as twin.config.MarkerConfig)
-SCHEDULE_KEYS = ("mount_dz_mm", "marker_anchor")
+
+
+@dataclass(frozen=True)
+class SceneParameter:
+    """A parameter of the real scene, not of the twin: the replay applies it; a Sim set never sees it."""
+    name: str
+    unit: str
+    low: float
+    high: float
+    log: bool
+    why: str
+
+
+# The phantom's surface slope (depth change per mm of world x / y about the slides' mean pose): not recorded.
+# With friction a slope drags the skin more as the press deepens: the slow drift of the whole marker field
+# along the real slides (docs/loop.md "Slides", diagnosis). Without friction it moves nearly nothing.
+SCENE_PARAMETERS = {p.name: p for p in (
+    SceneParameter("tilt_x", "mm/mm", -0.03, 0.03, False, "phantom slope along world x; +-1.7 deg: levelled by eye"),
+    SceneParameter("tilt_y", "mm/mm", -0.03, 0.03, False, "phantom slope along world y; +-1.7 deg: levelled by eye"),
+)}
+# parameters the replay applies outside the kernels: registry ones to the poses (mount dz) or to the projected
+# markers (anchor: that fraction of the rest offset template - bound rest, as twin.config.MarkerConfig), and the
+# scene's slope to the poses
+SCHEDULE_KEYS = ("mount_dz_mm", "marker_anchor", *SCENE_PARAMETERS)
 REACH_M = 0.030  # dome footprint radius (19 mm) + the widest inclusion spread (8 mm) + margin
 
 
@@ -73,12 +94,31 @@ def scene_config(cfg: TwinConfig, scene: Scene) -> TwinConfig:
 
 
 def plan_replay(pose_mm: np.ndarray, scene: Scene, tip_B_m: np.ndarray, dz_mm: float = 0.0,
-                frame_dt_s: float = FRAME_DT_S) -> tuple[Trajectory, np.ndarray]:
-    """The pose schedule through one trial's measured poses (F, 3) and the frame that reaches each."""
+                frame_dt_s: float = FRAME_DT_S, lead_in_mm: float = 0.0,
+                tilt: tuple[float, float] = (0.0, 0.0)) -> tuple[Trajectory, np.ndarray]:
+    """The pose schedule through one trial's measured poses (F, 3) and the frame that reaches each.
+    `lead_in_mm` > 0: press that far back along the first step and slide in at depth, so the first measured
+    frame is already in steady sliding, as the real one is (the recordings are trimmed mid-sweep, SPEC §13.4).
+    `tilt` (mm/mm along world x, y): the phantom's slope; the press deepens by tilt . (xy - scene origin)."""
     pose = np.asarray(pose_mm, np.float64)
     xy = scene.to_twin(pose[:, :2])
-    z = PHANTOM_TOP_M - (pose[:, 2] + dz_mm) * 1e-3
-    table = np.concatenate([[[*xy[0], APPROACH_Z_M[0]], [*xy[0], APPROACH_Z_M[1]]], np.column_stack([xy, z])])
+    slope = np.asarray(tilt, np.float64)
+
+    def depth_z(xy_m: np.ndarray, depth_mm: np.ndarray) -> np.ndarray:  # twin xy (m) -> tip z (m)
+        extra = ((np.atleast_2d(xy_m) - CENTRE_XY_M) * 1e3) @ slope if slope.any() else 0.0
+        return PHANTOM_TOP_M - (depth_mm + dz_mm + extra) * 1e-3
+
+    z = depth_z(xy, pose[:, 2])
+    start = [*xy[0]]
+    lead = []
+    if lead_in_mm > 0:
+        step = xy[1] - xy[0] if len(xy) > 1 else np.zeros(2)
+        if not np.linalg.norm(step) > 0:
+            raise ValueError("replay: lead_in_mm needs the first two measured poses apart (the slide's direction)")
+        start = xy[0] - step / np.linalg.norm(step) * lead_in_mm * 1e-3
+        lead = [[*start, float(depth_z(start, pose[:1, 2])[0])]]
+    table = np.concatenate([[[*start, APPROACH_Z_M[0]], [*start, APPROACH_Z_M[1]]], *([lead] if lead else []),
+                            np.column_stack([xy, z])])
     R = BASE_ROTATION.as_matrix()
     offset = R @ np.asarray(tip_B_m, np.float64)
     tip = table[0].copy()
@@ -102,7 +142,7 @@ def plan_replay(pose_mm: np.ndarray, scene: Scene, tip_B_m: np.ndarray, dz_mm: f
         poses.append(pose_matrix(BASE_ROTATION, tip - offset))
     traj = Trajectory(kind="slide", T_BA0=pose_matrix(BASE_ROTATION, table[0] - offset), T_BA=np.stack(poses),
                       record_from=0, frame_dt_s=frame_dt_s)
-    return traj, np.array(reached_at[2:])  # the measured frames (after the two approach waypoints)
+    return traj, np.array(reached_at[2 + len(lead):])  # the measured frames (after approach and lead-in)
 
 
 def split_params(params: dict) -> tuple[dict, dict]:
@@ -111,22 +151,26 @@ def split_params(params: dict) -> tuple[dict, dict]:
     unknown = sorted(set(params) - set(env_names) - set(SCHEDULE_KEYS))
     if unknown:
         raise ValueError(f"slide loop: unknown parameter(s) {unknown}; use per-env twin parameters "
-                         f"{sorted(env_names)} or {list(SCHEDULE_KEYS)} (palpation.twin.parameters)")
+                         f"{sorted(env_names)} or {list(SCHEDULE_KEYS)} (palpation.twin.parameters, "
+                         "loop.slides.SCENE_PARAMETERS)")
     env = {env_names[k]: float(v) for k, v in params.items() if k in env_names}
     return env, {k: float(v) for k, v in params.items() if k in SCHEDULE_KEYS}
 
 
 def replay(mesh: SensorMesh, cfg: TwinConfig, binding: MarkerBinding, sset: SequenceSet, scene: Scene,
-           candidates: list[dict], device: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+           candidates: list[dict], device: str | None = None,
+           lead_in_mm: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Every candidate on every trial of `sset`, one batch: markers (C, T, F, 127, 2) px and failed (C, T).
-    `cfg` is the base twin; the scene (compliant phantom, the vessels near these slides) is added here."""
+    `cfg` is the base twin; the scene (compliant phantom, the vessels near these slides) is added here;
+    `lead_in_mm`: plan_replay's slide-in before the first measured pose."""
     tip_B = tip_node_B(mesh)
     reqs, trajs, samples, anchors = [], [], [], []
     for params in candidates:
         env, sched = split_params(params)
         for t in range(sset.n_trials):
             reqs.append(EnvRequest("slide", vessel=False, name=f"{sset.trials[t]['name']}", **env))
-            traj, frames = plan_replay(sset.pose_mm[t], scene, tip_B, sched.get("mount_dz_mm", 0.0), cfg.frame_dt)
+            traj, frames = plan_replay(sset.pose_mm[t], scene, tip_B, sched.get("mount_dz_mm", 0.0), cfg.frame_dt,
+                                       lead_in_mm, (sched.get("tilt_x", 0.0), sched.get("tilt_y", 0.0)))
             trajs.append(traj)
             samples.append(frames)
             anchors.append(sched.get("marker_anchor", 0.0))

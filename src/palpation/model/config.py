@@ -50,7 +50,7 @@ class TrainConfig:
     focal_gamma: float = 3.0
     norm_stats: str = "sample"  # sample (quirk 7: batch_size augmented clips) | full
     norm_clips: int | None = None  # clips for `sample`; None = batch_size
-    rotation: str = "reference"  # none | reference (quirk 14) | consistent
+    rotation: str = "reference"  # none | reference (quirk 14) | consistent | lattice (ClipSet.gather)
     schedule: str = "none"  # none | step (StepLR(step_size, gamma), quirk 8)
     step_size: int = 64
     step_gamma: float = 0.5

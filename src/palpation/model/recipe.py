@@ -21,6 +21,9 @@ SWITCHES: dict[str, tuple[str, ...]] = {
     "calibration": ("calibration",),  # post-hoc calibration on the val split
 }
 REFERENCE = {f.name: f.default for f in dataclasses.fields(TrainConfig)}
+# switches that change only where training stops, which checkpoint is kept or how its scores are rescaled: their
+# runs follow the full robust recipe's training epoch for epoch (same draws, same steps) as far as both ran
+SAME_TRAJECTORY = ("early_stop", "select_ap", "calibration")
 
 
 def _yaml(value) -> str:

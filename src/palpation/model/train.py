@@ -80,7 +80,8 @@ def norm_stats(train: ClipSet, rest: np.ndarray, topo: ClipTopology, cfg: TrainC
 
     def chunks():
         for s in range(0, len(idx), NORM_CHUNK):
-            m, lab = train.gather(idx[s:s + NORM_CHUNK], rot[s:s + NORM_CHUNK], cfg.rotation == "consistent")
+            m, lab = train.gather(idx[s:s + NORM_CHUNK], rot[s:s + NORM_CHUNK], cfg.rotation == "consistent",
+                                  lattice=cfg.rotation == "lattice")
             yield clip_features(m, rest, topo), lab
 
     return NormStats.from_chunks(chunks(), cfg.norm_stats)
@@ -115,7 +116,7 @@ def training_batch(train: ClipSet, idx: np.ndarray, cfg: TrainConfig, rng: np.ra
     draw), then only the switches that are on, so the reference stream is untouched."""
     rot = draw_rotations(rng, len(idx), cfg.rotation)
     scales = draw_displacement_scales(rng, len(idx), cfg.displacement_scale)
-    m, lab = train.gather(idx, rot, cfg.rotation == "consistent", scales)
+    m, lab = train.gather(idx, rot, cfg.rotation == "consistent", scales, lattice=cfg.rotation == "lattice")
     m = drop_markers(jitter_markers(m, rng, cfg.jitter_px), rng, cfg.marker_dropout)
     return m, lab
 

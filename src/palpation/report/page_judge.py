@@ -46,8 +46,10 @@ def slide_loop_rounds(rounds: pd.DataFrame) -> tuple[str, list[str]]:
         first, last = float(g["mae_heldout_px"].iloc[0]), float(g["mae_heldout_px"].iloc[-1])
         added = ", ".join(e for e in g["effect_added"].iloc[1:]) or "nothing"
         change = f" ({100 * (last / first - 1):+.0f} %)" if first > 0 else ""
+        bounds = str(g["at_bounds"].iloc[-1]) if "at_bounds" in g and g["at_bounds"].notna().iloc[-1] else ""
         bullets.append(f"slide loop, fold {fold}: held-out motion MAE {first:.3f} -> {last:.3f} px{change}; "
-                       f"added: {added}.")
+                       f"added: {added}." + (f" Symptom: {bounds} (the fit wants more than the physical range; "
+                                             "docs/loop.md \"Slides\")." if bounds else ""))
     text = ("\n\nThe slide loop per fold and round (`loop_slides/loop_slides.csv`; each fold fitted on its trials, "
             "scored on the other fold's):\n\n"
             + markdown(["Fold", "Round", "Effect added", "MAE fit (px)", "MAE held-out (px)",

@@ -62,7 +62,13 @@ def bind_markers(nodes_B: np.ndarray, dome_nodes: np.ndarray, template_px: np.nd
         raise ValueError(f"marker binding needs at least {k} dome-surface nodes, "
                          f"the mesh has {len(dome_nodes)}")
     rest_node_px = camera.project(body_to_camera(np.asarray(nodes_B)[dome_nodes]))
-    dist, local = cKDTree(rest_node_px).query(np.asarray(template_px, dtype=np.float64), k=k)
+    return _bind_query(rest_node_px, cKDTree(rest_node_px), dome_nodes, template_px, k)
+
+
+def _bind_query(rest_node_px: np.ndarray, tree, dome_nodes: np.ndarray, template_px: np.ndarray,
+                k: int = N_NEAREST) -> MarkerBinding:
+    """bind_markers' query on projected rest nodes and their KD-tree (shared by several bindings)."""
+    dist, local = tree.query(np.asarray(template_px, dtype=np.float64), k=k)
     inv = 1.0 / np.maximum(dist, 1e-9)  # a marker exactly on a node takes (almost) all its weight
     weights = inv / inv.sum(axis=1, keepdims=True)
     rest_px = np.einsum("mk,mkc->mc", weights, rest_node_px[local])
@@ -144,8 +150,14 @@ class CameraBinding:
 def bind_markers_through(nodes_B: np.ndarray, dome_nodes: np.ndarray, template_px: np.ndarray,
                          image: ImageSimilarity, camera: Fisheye = DEFAULT_CAMERA) -> CameraBinding:
     template_px = np.asarray(template_px, np.float64)
-    nominal = bind_markers(nodes_B, dome_nodes, template_px, camera)
-    moved = bind_markers(nodes_B, dome_nodes, image.inverse(template_px), camera)
+    dome_nodes = np.asarray(dome_nodes)
+    if len(dome_nodes) < N_NEAREST:
+        return bind_markers(nodes_B, dome_nodes, template_px, camera)  # raises its clear error
+    # one projection and KD-tree of the rest nodes for both bindings (the loop's camera grid makes many)
+    rest_node_px = camera.project(body_to_camera(np.asarray(nodes_B)[dome_nodes]))
+    tree = cKDTree(rest_node_px)
+    nominal = _bind_query(rest_node_px, tree, dome_nodes, template_px)
+    moved = _bind_query(rest_node_px, tree, dome_nodes, image.inverse(template_px))
     return CameraBinding(moved, nominal.rest_px, image)
 
 
