@@ -1,5 +1,7 @@
 """Shared test fixtures: every test writes its outputs and MLflow store into a temp folder."""
 
+import os
+
 import pytest
 
 
@@ -42,3 +44,22 @@ def train_sets(tmp_path_factory):
     return {"sim": str(write_sim(root / "sim", rest, n_traj=7, n_frames=72)),
             "silicone": str(write_silicone(root / "silicone.npz", rest, n_videos=2, n_frames=8)),
             "meat": str(write_meat(root / "meat.npz", rest, n_frames=(9,) * 5, n_val=2))}
+
+
+@pytest.fixture(scope="session", autouse=True)
+def no_slurm_controller_probe(tmp_path_factory):
+    """Every snakemake process imports the SLURM executor plugin, which runs `scontrol show config` at import;
+    where slurm-client is installed but no controller runs (workflow/scripts/slurm_local.sh stopped), that blocks
+    ~9 s per call. No test talks to a controller (the SLURM profiles are only dry-run), so the tests see an
+    `scontrol` that fails at once, as on a machine without SLURM (the plugin then falls back to its defaults)."""
+    import shutil
+
+    if shutil.which("scontrol") is None:
+        yield
+        return
+    shim = tmp_path_factory.mktemp("no_slurm")
+    (shim / "scontrol").write_text("#!/bin/sh\necho 'scontrol: no SLURM controller in the test suite' >&2\nexit 1\n")
+    (shim / "scontrol").chmod(0o755)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("PATH", f"{shim}:{os.environ['PATH']}")
+        yield

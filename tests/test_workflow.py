@@ -38,9 +38,15 @@ def dry_run(tmp_path: Path, *args: str) -> str:
     return snakemake(tmp_path, "-n", *args)
 
 
-def test_dry_run_lists_the_whole_dag(tmp_path):
+@pytest.fixture(scope="module")
+def default_listing(tmp_path_factory) -> str:
+    """A fresh clone's plain dry run (the default profile), shared by the tests that read it."""
+    return dry_run(tmp_path_factory.mktemp("default"))
+
+
+def test_dry_run_lists_the_whole_dag(tmp_path, default_listing):
     """A fresh clone's dry run lists a job of every rule `rule all` depends on, and only those."""
-    listing = dry_run(tmp_path)
+    listing = default_listing
     stats = job_stats(listing)
     graph = snakemake(tmp_path, "--rulegraph")  # DOT, one node per rule of the default target's DAG
     rules = set(re.findall(r'label = "(\w+)"', graph))
@@ -128,11 +134,11 @@ def test_local_slurm_profile_dry_run(tmp_path):
     assert "train_report" in dry_run(tmp_path, "--workflow-profile", str(REPO_ROOT / "workflow/profiles/slurm-local"))
 
 
-def test_judge_dag_when_turned_on(tmp_path):
+def test_judge_dag_when_turned_on(tmp_path, default_listing):
     """Issue 12: judge.seeds [] keeps the judge out of `all`; seeds turn on exactly its jobs: the fold twins,
     a replay per candidate, the fold twins' Sim sets, the runs of calibrated and the fold twins (one per seed,
     or one per configuration with train.seeds_together), photo_loop's A-to-C (the main sweep's rule), the table."""
-    assert "twin_selection" not in job_stats(dry_run(tmp_path))
+    assert "twin_selection" not in job_stats(default_listing)
     extra = tmp_path / "judge.yaml"
     extra.write_text("judge: {seeds: [0, 1], slide_loop: 'trials=[1,2] frames=[5,7]'}\n")
     stats = job_stats(dry_run(tmp_path, "--configfile", str(extra)))

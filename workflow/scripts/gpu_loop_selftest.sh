@@ -5,11 +5,14 @@
 # results/twin/mesh_coarse.npz) and the states' geometry from the photo set MEASURED (default
 # results/data/photos/measured_photos, .npz + .json; rule measured_photos run elsewhere).
 #   bash workflow/scripts/gpu_loop_selftest.sh OUTDIR [extra Hydra overrides...]
-# Copy OUTDIR/loop_selftest.csv and selftest.md to docs/results/ afterwards. A killed run resumes
-# (the sets are re-made from the seed, the studies continue in OUTDIR/selftest/study.db).
-# On the lent device (10 min per command; $OUT is emptied before each):
+# Copy OUTDIR/loop_selftest.csv and selftest.md to docs/results/ afterwards. The run is detached
+# (workflow/scripts/device_run.sh): it outlives the command, LIMIT_S (default: until done) is how long a call
+# waits (exit 75: still running), and the same command again re-attaches (OUTDIR/selftest.pid). A killed run
+# resumes (the sets are re-made from the seed, the studies continue in OUTDIR/selftest/study.db).
+# On the lent device (10 min per command; $OUT is emptied before each), until it exits 0:
 #   LIMIT_S=560 bash workflow/scripts/gpu_loop_selftest.sh results/loop_gpu; cp results/loop_gpu/*.{csv,md,json,log} $OUT/
 set -uo pipefail
+source "$(dirname "${BASH_SOURCE[0]}")/device_run.sh"
 out=${1:?usage: gpu_loop_selftest.sh OUTDIR [overrides...]}; shift
 mesh=${MESH:-results/twin/mesh_coarse.npz}
 measured=${MEASURED:-results/data/photos/measured_photos}
@@ -19,17 +22,15 @@ for f in "$mesh" "$measured.npz" "$measured.json"; do
 done
 export PYTHONPATH="$PWD/src${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 mkdir -p "$out"
-python3 -c "import warp as wp, hydra, optuna; wp.init(); print('warp', wp.__version__, wp.get_cuda_devices())" || exit 3
-start=$(date +%s)
-# LIMIT_S: stop cleanly before the device's per-command limit; OUTDIR under results/ survives on a warm
-# machine, and the same command resumes there (a fresh machine starts over)
-timeout -s INT "${LIMIT_S:-0}" python3 -m palpation.apps.loop mode=selftest track=false progress=false twin.device=cuda mesh="$mesh" \
-  measured="$measured" loop.selftest.runs_per_case="${RUNS:-5}" loop.split_by_kind=false loop.final_refit_starts=3 loop.compete=true \
-  loop.search.ask_workers="${ASK_WORKERS:-$(nproc)}" out.dir="$out" hydra.run.dir="$out/hydra" "$@" \
-  > "$out/selftest.log" 2>&1
-rc=$?
-echo "loop self-test rc=$rc after $(( $(date +%s) - start )) s"
-[ "$rc" = 124 ] && echo "stopped at LIMIT_S=$LIMIT_S s: run the same command again on this warm machine to resume"
+if ! device_attach "$out" selftest; then
+  python3 -c "import warp as wp, hydra, optuna; wp.init(); print('warp', wp.__version__, wp.get_cuda_devices())" || exit 3
+  device_start "$out" selftest python3 -m palpation.apps.loop mode=selftest track=false progress=false twin.device=cuda \
+    mesh="$mesh" measured="$measured" loop.selftest.runs_per_case="${RUNS:-5}" loop.split_by_kind=false \
+    loop.final_refit_starts=3 loop.compete=true loop.search.ask_workers="${ASK_WORKERS:-$(nproc)}" out.dir="$out" \
+    hydra.run.dir="$out/hydra" "$@"
+fi
+echo "loop self-test:"
+device_wait "$out" selftest
 grep -E "done in|Error|error" "$out/selftest.log" | tail -3
 [ -f "$out/selftest.md" ] && sed -n '3,9p' "$out/selftest.md"
-exit $rc
+exit $DEVICE_RC

@@ -22,6 +22,7 @@
 #   GPU_SLOTS=N lets N GPU jobs share the card (the profile's gpu=4); CORES overrides the profile's cores
 #     (Snakemake counts 4 threads a training job: five jobs at once need CORES=20 on the 16-core host).
 set -uo pipefail
+source "$(dirname "${BASH_SOURCE[0]}")/device_run.sh"  # the detached, resumable run (pid guard, unlock, LIMIT_S)
 out=${1:?usage: gpu_recipe_ablation.sh OUTDIR [snakemake args...]}; shift
 profile=${PROFILE:-paper}
 [ -d "workflow/profiles/$profile" ] || { echo "gpu_recipe_ablation: no workflow/profiles/$profile" >&2; exit 2; }
@@ -50,12 +51,7 @@ if [ -n "${TREE:-}" ]; then
   cd "$TREE" || exit 2
   export PYTHONPATH="$PWD/src${pythonpath:+:$pythonpath}"  # the tree's own code
 fi
-# the carried mesh must look newer than its conf so that rule mesh (gmsh) never reruns here (as gpu_judge.sh)
-res=$(sed -n 's/^twin_resolution: *\([a-z]*\).*/\1/p' "conf/workflow/$profile.yaml")
-for c in conf/mesh.yaml "conf/twin/mesh/$res.yaml"; do
-  [ -f "results/twin/mesh_$res.npz" ] && [ "$c" -nt "results/twin/mesh_$res.npz" ] &&
-    touch "results/twin/mesh_$res.npz" "results/twin/mesh_$res.json"
-done
+device_touch_mesh "$profile"
 if [ -n "${LOOP_FROM:-}" ] && [ ! -f results/loop/.carried ]; then
   src=$LOOP_FROM; [ -e "$src" ] || src="$OLDPWD/$LOOP_FROM"  # relative to the repo root, as OUTDIR
   # the loop's inputs (the carried photo measurements) older than its outputs: neither reruns
@@ -76,29 +72,15 @@ fi
 snake_opts=()
 [ -n "${GPU_SLOTS:-}" ] && snake_opts+=("--resources=gpu=$GPU_SLOTS")  # one value: --resources takes several
 [ -n "${CORES:-}" ] && snake_opts+=("--cores=$CORES")
-pid=$(cat "$out/snakemake.pid" 2>/dev/null)
-if [ -n "$pid" ] && kill -0 "$pid" 2>/dev/null; then
-  echo "re-attaching to the run still going (pid $pid)"
-else
-  # a killed Snakemake leaves its lock; nothing else runs here, so a new run may take it over
-  [ -n "$(ls -A .snakemake/locks 2>/dev/null)" ] &&
-    python3 -m snakemake --workflow-profile "workflow/profiles/$profile" --unlock > /dev/null 2>&1
-  rm -f "$out/snakemake.rc"
-  setsid bash -c 'python3 -m snakemake --workflow-profile "$0" --keep-going "${@:2}" >> "$1/snakemake.log" 2>&1
-                  echo $? > "$1/snakemake.rc"' "workflow/profiles/$profile" "$out" "${snake_opts[@]}" "${targets[@]}" "$@" \
-    < /dev/null > /dev/null 2>&1 &
-  pid=$!
-  echo "$pid" > "$out/snakemake.pid"
+if ! device_attach "$out" snakemake; then
+  device_unlock gpu_recipe_ablation "$profile"
+  device_start "$out" snakemake python3 -m snakemake --workflow-profile "workflow/profiles/$profile" --keep-going \
+    "${snake_opts[@]}" "${targets[@]}" "$@"
 fi
-start=$(date +%s)
-while kill -0 "$pid" 2>/dev/null; do
-  [ "${LIMIT_S:-0}" -gt 0 ] && [ $(( $(date +%s) - start )) -ge "$LIMIT_S" ] && break
-  sleep 5
-done
-if kill -0 "$pid" 2>/dev/null; then rc=75; else rc=$(cat "$out/snakemake.rc" 2>/dev/null || echo 1); fi
-echo "recipe ablation (${PART:-all}) rc=$rc after waiting $(( $(date +%s) - start )) s"
-[ "$rc" = 75 ] && echo "still running (pid $pid): run the same command again on this warm machine to wait for it"
-grep -E "steps \(|Error|Exiting" "$out/snakemake.log" | tail -5
+echo "recipe ablation (${PART:-all}):"
+device_wait "$out" snakemake
+rc=$DEVICE_RC
+device_progress "$out" snakemake 5
 runs=$(find results/recipe -path '*/seed*' \( -name metrics.json -o -name scores.npz -o -name pr.npz \) 2>/dev/null | sort)
 [ -n "$runs" ] && tar czf "$out/recipe_runs.tgz" $runs
 echo "$(echo "$runs" | grep -c metrics.json) finished runs in $out/recipe_runs.tgz"
