@@ -1,6 +1,7 @@
 """workflow/scripts/gpu_recipe_ablation.sh at toy size on the CPU: one part of the ablation through Snakemake, the
 seeds and the two Sim-trained configurations in one job, packed for the trip back from the device."""
 
+import hashlib
 import json
 import os
 import subprocess
@@ -12,6 +13,7 @@ import pytest
 import yaml
 
 from palpation.graph.layout import rest_layout
+from palpation.graph.sources import sim_trajectory_files
 from palpation.graph.synthetic import write_meat, write_silicone, write_sim
 from palpation.paths import REPO_ROOT
 
@@ -50,6 +52,10 @@ def test_a_part_runs_packs_and_resumes(tmp_path):
     done = script(work, "out", *args, PART="robust_jitter")
     assert done.returncode == 0, (done.stdout + (work / "out/snakemake.log").read_text())[-3000:]
     assert "4 finished runs" in done.stdout  # 2 seeds x (A-to-B, A-to-C), trained once
+    sim = work / "results/sim/dataset"  # the fingerprint hashes the manifest's trajectory files, in its order
+    names = [f.name for f in sim_trajectory_files(sim / "manifest.json")]
+    lines = "".join(f"{hashlib.sha256((sim / n).read_bytes()).hexdigest()}  {n}\n" for n in names)
+    assert (work / "out/sim_fingerprint.txt").read_text().strip() == hashlib.sha256(lines.encode()).hexdigest()[:16]
     with tarfile.open(work / "out/recipe_runs.tgz") as tar:
         names = sorted(tar.getnames())
     assert names == sorted(f"results/recipe/robust/jitter/{exp}/L5/seed{s}/{f}" for exp in ("A-to-B", "A-to-C")

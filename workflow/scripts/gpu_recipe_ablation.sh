@@ -86,9 +86,11 @@ runs=$(find results/recipe -path '*/seed*' \( -name metrics.json -o -name scores
 echo "$(echo "$runs" | grep -c metrics.json) finished runs in $out/recipe_runs.tgz"
 [ -d results/recipe/report ] && cp -r results/recipe/report "$out/"
 if [ -f results/sim/dataset/manifest.json ]; then  # which Sim set these runs saw: compare across sessions
-  (cd results/sim/dataset && sha256sum manifest.json $(python3 -c "import json
-print(' '.join(json.load(open('manifest.json'))['trajectories']))") | sha256sum | cut -c1-16) > "$out/sim_fingerprint.txt"
-  echo "Sim set fingerprint $(cat "$out/sim_fingerprint.txt")"
+  # the trajectory files only: the manifest also carries run metadata that differs between identical sets
+  files=$(cd results/sim/dataset && python3 -c "from palpation.graph.sources import sim_trajectory_files
+print(' '.join(map(str, sim_trajectory_files('manifest.json'))))") &&
+    [ -n "$files" ] && (cd results/sim/dataset && sha256sum $files | sha256sum | cut -c1-16) > "$out/sim_fingerprint.txt" &&
+    echo "Sim set fingerprint $(cat "$out/sim_fingerprint.txt")" || echo "gpu_recipe_ablation: no Sim set fingerprint" >&2
 fi
 cp -r results/logs/recipe "$out/logs" 2>/dev/null
 exit $rc
