@@ -20,18 +20,18 @@ import pandas as pd
 from palpation.io import save_json, save_text
 from palpation.tracking import git_commit
 
-STAMP = "results/bench/.run_start"
+STAMP = "bench/.run_start"  # under the results root
 BENCHMARKS = "benchmarks"  # under the results root
 JOB_COLUMNS = ["rule", "job", "s", "max_rss", "cpu_time", "end"]
 
 
 def stamp_start(workdir: str | Path = ".") -> None:
-    save_text(Path(workdir) / STAMP, f"{time.time()}\n")
+    save_text(Path(workdir) / "results" / STAMP, f"{time.time()}\n")
 
 
 def run_start(results: str | Path) -> float | None:
     """The start of the latest run (`onstart`'s stamp) under a results root, or None."""
-    stamp = Path(results) / "bench" / ".run_start"
+    stamp = Path(results) / STAMP
     return float(stamp.read_text()) if stamp.exists() else None
 
 
