@@ -15,6 +15,7 @@ device_attach() {
   [ -n "$DEVICE_PID" ] && kill -0 "$DEVICE_PID" 2>/dev/null || return 1
   echo "already running (pid $DEVICE_PID): re-attaching; progress:"
   device_progress "$1" "$2" 1
+  return 0  # attached, even while the log has no progress line yet (grep's status must not leak out)
 }
 
 device_unlock() {
