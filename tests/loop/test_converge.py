@@ -104,3 +104,39 @@ def test_a_larger_set_starts_from_the_end_points_of_its_subsets(tmp_path, monkey
         assert pair["after"]["fit"] <= single["after"]["fit"]
     assert subset_starts([(frozenset(), {"a": 1}), (frozenset({"x"}), {"a": 2}), (frozenset({"x", "y"}), {"a": 3})],
                          ("x", "y")) == [{"a": 1}, {"a": 2}]  # proper subsets only
+
+
+F_Q = Q + 0.2 * _rng.normal(size=REST.shape)  # an anchor field that mimics a stiffness change
+
+
+def mimic(state: State, p) -> np.ndarray:
+    e = np.log(p["E"] / E0) / np.log(1.25)
+    return REST + AMP[state.name] * (e * Q + p["marker_anchor"] / 0.5 * F_Q)
+
+
+def simulate_mimic(jobs):
+    if not jobs:
+        return np.zeros((0, *REST.shape)), np.zeros(0, bool)
+    return np.stack([mimic(s, p) for s, p in jobs]), np.zeros(len(jobs), bool)
+
+
+@pytest.mark.parametrize("refit_starts", [1, 3])
+def test_the_final_refit_also_starts_from_the_last_null_try(tmp_path, refit_starts):
+    # contact + mount, run 31 of the 60-run self-test: round 2 kept nothing, its null try (the same set
+    # re-fitted) reached the noise, and the final twin stayed at the round-1 fit; now its end point is a start.
+    # Here the data differ from the twin by E alone; the anchor mimics it and is refused against the null try
+    rng = np.random.default_rng(0)
+    full = initial_params({"E": E0 * 1.25 ** 1.5, "alpha": 0.02})
+    targets = [Target(State(n, "press", 2.0), mimic(State(n, "press"), full) + rng.normal(0, NOISE, REST.shape),
+                      n != "h") for n in AMP]
+    p = Problem("toy", "key", targets, initial_params({"E": E0, "alpha": 0.02}), ["E"],
+                candidates=["marker_anchor"], noise_px=NOISE)
+    cfg = LoopConfig(effects=["marker_anchor"], compete=True, final_refit_starts=refit_starts,
+                     search=SearchSettings(sampler="random", n_trials=8, n_startup=8)).validate()
+    evaluate([p], simulate_mimic)
+    run_rounds([p], simulate_mimic, cfg, tmp_path / "s.db", "toy", 1)
+    assert p.effects == [] and p.rounds and p.rounds[0]["after"] is not None and not p.rounds[0]["accepted"]
+    assert "not beyond re-fitting alone" in p.rounds[0]["after"]["gate"]["why"]
+    null_end = p.rounds[0]["after"]["gate_null"]["params"]
+    assert (p.starts == [null_end]) == (refit_starts > 1) and len(p.starts) <= refit_starts - 1
+    assert abs(np.log(null_end["E"] / E0) / np.log(1.25) - 1.5) < 0.05  # the null try found E

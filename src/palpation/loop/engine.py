@@ -352,6 +352,8 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
         for p in active:
             if not p.done and not any(r["round"] == k and r["accepted"] for r in p.rounds):
                 p.done = True  # every try of this round was rejected
+                if nulls.get(p.name) is not None and cfg.final_refit_starts > 1:  # the same set re-fitted: a
+                    p.starts = [nulls[p.name][2]["params_final"], *p.starts][:cfg.final_refit_starts - 1]  # start
         if on_round is not None:
             on_round(k, problems)
         rounds.set_postfix_str(f"{sum(not p.done for p in problems)} of {len(problems)} going", refresh=False)

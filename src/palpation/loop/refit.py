@@ -14,6 +14,10 @@ contact fit left), and the final check reads it as unexplained. Two guards, both
   held-out is not significantly worse, brings the final twin to its optimum, so the residual tested
   against the detector noise is what the twin cannot reach, not what the search left. Every try, the null
   try included, gets the same local finish after its search (engine.finish), so the gate compares optima;
+* the final refit also starts from the **last null try's end point** when the last round kept nothing: it is the
+  same effect set re-fitted, and it was thrown away with the round (60-run H200 self-test, contact + mount run 31:
+  the round-2 null try reached a held-out of 0.26 px, the final twin stayed at 1.84 px); within
+  loop.final_refit_starts;
 * **nested starts** (`subset_starts`, loop.nested_starts): a set's search also starts from the end point of
   every subset of it tried earlier in the round (the null try's is the empty set), with the new effects off.
   A larger set contains each subset's optimum, so it can only fit as well or better; from its own warm starts
