@@ -140,3 +140,14 @@ def test_the_final_refit_also_starts_from_the_last_null_try(tmp_path, refit_star
     null_end = p.rounds[0]["after"]["gate_null"]["params"]
     assert (p.starts == [null_end]) == (refit_starts > 1) and len(p.starts) <= refit_starts - 1
     assert abs(np.log(null_end["E"] / E0) / np.log(1.25) - 1.5) < 0.05  # the null try found E
+
+
+@pytest.mark.parametrize("converged", [True, False])
+def test_the_verdict_says_when_the_final_refit_stopped_at_its_cap(converged):
+    from palpation.loop.report import verdict_lines
+
+    p = valley_problem()
+    summ = {"fit": 0.5, "heldout": 0.6}
+    p.final = {"refit": {"kept": 3, "starts": 1, "before": summ, "after": summ, "converged": converged}}
+    text = "\n".join(verdict_lines(p, {"mean_px": 0.5, "target_mm": 0.25, "target_set": "measured_photos"}))
+    assert ("stopped at loop.final_refit_iters" in text) == (not converged)
