@@ -78,7 +78,12 @@ class LoopConfig:
     # every finish of a search that has the camera also starts from the camera's best other basin: a grid of
     # principal points, f and rotation in closed form (loop.basins); false = the search's best trials only
     camera_basins: bool = True
-    final_refit_iters: int = 3
+    # a set's search also starts from the end point of every subset of it tried earlier in the round (the null
+    # try's: the empty set), so a larger set fits at least as well as what it contains (loop.refit.subset_starts)
+    nested_starts: bool = True
+    # up to final_refit_iters LM steps; a chain stops earlier once a step gains < 0.1 % (loop.polish.MIN_GAIN).
+    # 3 left the 60-run H200 self-test's contact + camera finals still descending (1.63 -> 1.08 px in 3 steps)
+    final_refit_iters: int = 10
     # every try (the null try too) is finished by a bounded Levenberg-Marquardt solver after its search
     # (loop.polish): polish_iters iterations from its polish_starts best distinct trials (0 = off), so tries
     # are compared at convergence; the final refit starts from the final twin and final_refit_starts - 1

@@ -31,7 +31,7 @@ from palpation.loop.gate import decide, heldout_z
 from palpation.loop.inputs import Target
 from palpation.loop.recalibrate import recalibrate
 from palpation.loop.polish import distinct_starts, polish
-from palpation.loop.refit import NULL, null_problem
+from palpation.loop.refit import NULL, null_problem, subset_starts
 from palpation.progress import bar
 
 log = logging.getLogger(__name__)
@@ -267,6 +267,7 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                 log.info("loop '%s' round %d: no effect explains the residual (BIC); stop", p.name, k)
         nulls: dict[str, tuple] = {}  # per problem: the null try's (summary, markers, fit), or None if it diverged
         winners: dict[str, Winner] = {}  # per problem: the round's best set so far (loop.compete)
+        ends: dict[str, list] = {p.name: [] for p in active}  # (effects, end params) of this round's tries
         for attempt in range(max((len(q) for q in queue.values()), default=0)):
             trying = [p for p in active if not p.done and len(queue[p.name]) > attempt]
             if not trying:
@@ -286,7 +287,8 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                 p.trust = trust_region(p, old, cfg.search.trust_factor, cfg.search.bounds)
                 estimates = linear_estimate(p, item["effects"], before[p.name][5], item["sigs"], refits[p.name],
                                             steps, cfg.search.bounds)
-                warm[p.name] = [dict(before[p.name][1]), *estimates]
+                nested = subset_starts(ends[p.name], item["effects"]) if cfg.nested_starts else []
+                warm[p.name] = [dict(before[p.name][1]), *nested, *estimates]  # nested: loop.refit
             fits = recalibrate([*trying, *extra], simulate, cfg.search, db_path, f"r{k}t{attempt}", twin_key, warm,
                                progress=progress)
             for p in [*trying, *extra]:
@@ -297,6 +299,10 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
             diverged = evaluate([*trying, *extra], simulate, strict=False)
             for q in extra:  # a diverged null try leaves the previous twin as the only reference
                 nulls[q.name[:-len(NULL)]] = None if q.name in diverged else (q.summary(), q.markers, fits[q.name])
+                if q.name not in diverged:
+                    ends[q.name[:-len(NULL)]].append((frozenset(), fits[q.name]["params_final"]))
+            for p in [p for p in trying if p.name not in diverged]:  # a start of the larger sets tried next
+                ends[p.name].append((frozenset(queue[p.name][attempt]["effects"]), fits[p.name]["params_final"]))
             for p in trying:
                 item, (b, b_params, b_markers, att, b_searched, _) = queue[p.name][attempt], before[p.name]
                 if p.name in diverged:  # the fit's optimum was found on the fitted states only
@@ -346,6 +352,8 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
         for p in active:
             if not p.done and not any(r["round"] == k and r["accepted"] for r in p.rounds):
                 p.done = True  # every try of this round was rejected
+                if nulls.get(p.name) is not None and cfg.final_refit_starts > 1:  # the same set re-fitted: a
+                    p.starts = [nulls[p.name][2]["params_final"], *p.starts][:cfg.final_refit_starts - 1]  # start
         if on_round is not None:
             on_round(k, problems)
         rounds.set_postfix_str(f"{sum(not p.done for p in problems)} of {len(problems)} going", refresh=False)

@@ -115,7 +115,8 @@ def polish(problems: list, starts: Mapping[str, Sequence[Mapping[str, float]]], 
     """Levenberg-Marquardt chains from every start of every problem, in lockstep (two twin batches per
     iteration over all chains). Sets each problem's params to its best chain's end point (p.markers are
     left for the caller to re-simulate on every state) and returns per problem the fitted MAE at the best
-    start and at the end, the iterations kept and the twin jobs of all chains together. The parameters
+    start and at the end, the iterations kept, whether the best chain converged (False: stopped at `iters`
+    while still descending) and the twin jobs of all chains together. The parameters
     polished are p.searched, within limits[p.name] (loop.search.bounds and the problem's trust region)."""
     chains = []
     for p in problems:
@@ -123,6 +124,7 @@ def polish(problems: list, starts: Mapping[str, Sequence[Mapping[str, float]]], 
         for s in starts.get(p.name, [p.params]):
             x = {**p.params, **dict(s)}
             chains.append({"p": p, "fit": fit, "x": x, "base": None, "mae": np.inf, "kept": 0, "going": True,
+                           "converged": False,
                            "u": units(p.searched, x, limits.get(p.name))})
     jobs_asked = 0
     for it in range(iters + 1):
@@ -179,7 +181,7 @@ def polish(problems: list, starts: Mapping[str, Sequence[Mapping[str, float]]], 
                 if best is None or v < best[0]:
                     best = (v, x, b)
             if best is None or best[0] >= c["mae"] * (1.0 - MIN_GAIN):
-                c["going"] = False  # converged (or every step diverged)
+                c["going"], c["converged"] = False, True  # converged (or every step diverged)
                 continue
             c["mae"], c["x"], c["base"] = best[0], best[1], best[2]
             c["kept"] += 1
@@ -187,10 +189,11 @@ def polish(problems: list, starts: Mapping[str, Sequence[Mapping[str, float]]], 
     for p in problems:
         mine = [c for c in chains if c["p"] is p and c["base"] is not None]
         if not mine:
-            out[p.name] = {"kept": 0, "chains": 0, "jobs_all": jobs_asked}
+            out[p.name] = {"kept": 0, "chains": 0, "jobs_all": jobs_asked, "converged": False}
             continue
         best = min(mine, key=lambda c: c["mae"])
         p.params = dict(best["x"])
         out[p.name] = {"fit_start": float(min(c["mae0"] for c in mine)), "fit_end": float(best["mae"]),
-                       "kept": int(best["kept"]), "chains": len(mine), "jobs_all": jobs_asked}
+                       "kept": int(best["kept"]), "chains": len(mine), "jobs_all": jobs_asked,
+                       "converged": bool(best["converged"])}
     return out

@@ -40,7 +40,7 @@ def space_of(names: Sequence[str], overrides: Mapping[str, Sequence[float]] | No
 
 
 # bump when what a trial means changes in code (warm starts, objective): old studies are then not resumed
-SEARCH_VERSION = 4
+SEARCH_VERSION = 5  # 5: nested starts (loop.refit.subset_starts) among the warm starts
 
 
 def study_name(key: str, tag: str, space: list[ParamSpec], fixed: Mapping[str, float], s: SearchSettings,

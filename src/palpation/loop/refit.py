@@ -13,7 +13,16 @@ contact fit left), and the final check reads it as unexplained. Two guards, both
   final twin and the last kept try's other distinct best trials, kept only if the fitted MAE falls and the
   held-out is not significantly worse, brings the final twin to its optimum, so the residual tested
   against the detector noise is what the twin cannot reach, not what the search left. Every try, the null
-  try included, gets the same local finish after its search (engine.finish), so the gate compares optima.
+  try included, gets the same local finish after its search (engine.finish), so the gate compares optima;
+* the final refit also starts from the **last null try's end point** when the last round kept nothing: it is the
+  same effect set re-fitted, and it was thrown away with the round (60-run H200 self-test, contact + mount run 31:
+  the round-2 null try reached a held-out of 0.26 px, the final twin stayed at 1.84 px); within
+  loop.final_refit_starts;
+* **nested starts** (`subset_starts`, loop.nested_starts): a set's search also starts from the end point of
+  every subset of it tried earlier in the round (the null try's is the empty set), with the new effects off.
+  A larger set contains each subset's optimum, so it can only fit as well or better; from its own warm starts
+  alone a 6-parameter contact + camera search ended at a fit of 2.50 px where contact alone had reached
+  2.05 px (60-run H200 self-test, run 36), and the pair then lost to the single it contains.
 """
 
 from __future__ import annotations
@@ -55,6 +64,14 @@ def null_problem(p, searched: list[str], trust: Mapping, warm_residual: np.ndarr
     return q, [dict(p.params), *gauss_newton(p, warm_residual, refit, steps, limits)]
 
 
+def subset_starts(ends, effects) -> list[dict]:
+    """The end points (params) of the sets tried earlier in this round that are proper subsets of `effects`.
+
+    `ends`: [(frozenset of effects, params at the end of that try's finish)], the null try as frozenset()."""
+    new = frozenset(effects)
+    return [dict(params) for done, params in ends if done < new]
+
+
 def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_crit: float) -> dict[str, dict]:
     """The final refit: Levenberg-Marquardt (loop.polish) on every problem's searched parameters from its
     current twin and p.starts (the last kept try's other distinct best trials), all problems in one batch
@@ -63,7 +80,7 @@ def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_cri
     before and after, the LM iterations kept and the starts."""
     from palpation.loop.engine import evaluate
 
-    log_ = {p.name: {"before": p.summary(), "kept": 0} for p in problems}
+    log_ = {p.name: {"before": p.summary(), "kept": 0, "converged": True} for p in problems}
     going = [p for p in problems if p.searched]
     old = {p.name: (dict(p.params), p.markers) for p in going}
     res = polish(going, {p.name: [dict(p.params), *p.starts] for p in going}, simulate,
@@ -78,11 +95,13 @@ def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_cri
         if a is None or a["fit"] >= b["fit"] or z < -z_crit:  # no gain, or it overfits the fitted states
             p.params, p.markers = params, markers
         else:
-            log_[p.name].update(kept=res[p.name]["kept"], starts=res[p.name]["chains"])
+            log_[p.name].update(kept=res[p.name]["kept"], starts=res[p.name]["chains"],
+                                converged=res[p.name]["converged"])
     for p in problems:
         log_[p.name]["after"] = p.summary()
         if log_[p.name]["kept"]:
-            log.info("loop '%s': final refit, %d LM step(s) from %d start(s): fit MAE %.3f -> %.3f px", p.name,
+            log.info("loop '%s': final refit, %d LM step(s) from %d start(s): fit MAE %.3f -> %.3f px%s", p.name,
                      log_[p.name]["kept"], log_[p.name]["starts"], log_[p.name]["before"]["fit"],
-                     log_[p.name]["after"]["fit"])
+                     log_[p.name]["after"]["fit"],
+                     "" if log_[p.name]["converged"] else " (stopped at loop.final_refit_iters, not converged)")
     return log_

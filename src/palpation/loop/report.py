@@ -136,7 +136,9 @@ def verdict_lines(p: Problem, meta: Mapping) -> list[str]:
         L.append(f"* Final refit ({rf['kept']} Levenberg-Marquardt step(s) of the fitted parameters, best of "
                  f"{rf.get('starts', 1)} start(s)): fitted MAE "
                  f"{rf['before']['fit']:.2f} → {rf['after']['fit']:.2f} px, held-out {rf['before']['heldout']:.2f} → "
-                 f"{rf['after']['heldout']:.2f} px.")
+                 f"{rf['after']['heldout']:.2f} px"
+                 + ("." if rf.get("converged", True) else "; stopped at loop.final_refit_iters while still descending, "
+                    "so the residual below is partly what the search left."))
     t = f.get("test")
     if t:
         head = (f"* Remaining residual: RMS {t['rms_px']:.2f} px per coordinate on the fitted states against detector "
