@@ -23,7 +23,7 @@ class GateSettings:
     inner_folds: int | None = None  # None: leave one trial out; K: K interleaved groups of the fold's trials
     test: str = "t"  # "t": one-sided paired t-test; "wilcoxon": one-sided signed-rank (exact for small n)
     alpha: float = 0.05
-    tries: int = 2  # effects per round (best fitted MAE first) searched inner-fold in the same twin batches
+    tries: int = 1  # effects per round (best fitted MAE first) searched inner-fold in the same twin batches
 
     def validate(self, where: str = "conf/slide_loop.yaml") -> "GateSettings":
         if self.test not in TESTS or not 0 < self.alpha < 1 or self.tries < 1:
