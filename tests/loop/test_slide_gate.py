@@ -70,6 +70,13 @@ def test_inner_gate_with_the_continuous_search_is_seeded_and_batched():
     assert again["params"] == one["params"] and again["gate"] == one["gate"]
 
 
+def test_a_fold_of_one_trial_keeps_nothing():
+    s = toy_set(2, 3)
+    result = run_slide_loop(fake_twin(s.markers.astype(np.float64))[0], s, settings(True), [1, 2])
+    assert [r["effect_added"] for r in result["rows"]] == ["none", "none"]
+    assert all(not t["passed"] and np.isnan(t["mae_inner_cv_px"]) and t["p"] == 1.0 for t in result["gate"])
+
+
 def test_paired_test_and_splits():
     assert [x.tolist() for x in inner_splits(5, None)] == [[0], [1], [2], [3], [4]]
     assert [x.tolist() for x in inner_splits(5, 2)] == [[0, 2, 4], [1, 3]]

@@ -261,7 +261,8 @@ def run_fold(evaluate: Evaluate, fit: SequenceSet, held: SequenceSet, settings: 
                      _inner_tpe(score, current, tried, splits, settings, seed + 250)) if splits else {}
             kept = None
             for e in tried:
-                v = verdict(now, inner.get(e, np.full(0, np.inf)), gate, settings.min_improvement_px)
+                # no inner fold (a fold of one trial): nothing can be left out, so nothing is shown and it is refused
+                v = verdict(now, inner.get(e, np.full(len(now), np.nan)), gate, settings.min_improvement_px)
                 tries.append({"fold": fold, "round": k, "effect": e, "mae_fit_px": float(mae[best_of[e]]), **v})
                 log.info("fold %s round %d gate %s: fitted %.3f px; left-out trials %.3f -> %.3f px (%s test p %.3g,"
                          " alpha %g, %d trials): %s", fold, k, e, mae[best_of[e]], v["mae_before_px"],
