@@ -160,6 +160,33 @@ def test_judge_dag_when_turned_on(tmp_path, default_listing):
     assert stats["meat_set"] == 1  # A-to-C's test set: an input of the jobs that score it
 
 
+def test_judge_reuse_reruns_only_what_the_slide_loop_changes(tmp_path):
+    """judge.reuse: calibrated's and photo_loop's fitted twins and runs come from an earlier run (carried files):
+    their Sim sets and training leave the DAG, their replays and the table read the carried files."""
+    reuse = tmp_path / "reuse"
+    lines = ["judge:", "  seeds: [0]", "  slide_loop: 'trials=[1,2] frames=[5,7]'", "  recipe: robust", "  reuse:"]
+    for twin in ("calibrated", "photo_loop"):
+        (reuse / twin / "twin_fit").mkdir(parents=True)
+        (reuse / twin / "twin_fit" / "fitted.yaml").write_text("# @package twin\n")
+        for exp in ("A-to-B", "A-to-C"):
+            run = reuse / "train" / twin / exp / "L5" / "seed0"
+            run.mkdir(parents=True)
+            (run / "scores.npz").write_bytes(b"")
+        lines.append(f"    {twin}: {{fit: {reuse / twin / 'twin_fit' / 'fitted.yaml'}, runs: {reuse / 'train' / twin}}}")
+    extra = tmp_path / "judge.yaml"
+    extra.write_text("\n".join(lines) + "\ntrain: {seeds_together: true}\n")
+    listing = dry_run(tmp_path, "-p", "--configfile", str(extra))
+    stats = job_stats(listing)
+    assert stats["judge_train_seeds"] == 2 and stats["judge_slides"] == 4  # the fold twins only; every replay
+    assert "simulate_dataset_calibrated" not in stats
+    table = next(line for line in listing.splitlines() if "SNAKEMAKE_RULE=twin_selection" in line)
+    assert f"runs.calibrated={reuse / 'train' / 'calibrated'}" in table
+    assert f"file://{reuse / 'photo_loop'}]" in listing
+    extra.write_text("judge: {seeds: [0], reuse: {slide_loop: {fit: a, runs: b}}}\n")
+    (tmp_path / "bad").mkdir()
+    assert "judge.reuse.slide_loop: need a candidate of" in failing_dry_run(tmp_path / "bad", "--configfile", str(extra))
+
+
 def test_paper_recipe_ablation_plan(tmp_path):
     """The paper profile's recipe ablation (docs/recipe.md, its device-time plan): with train.seeds_together one job
     per (recipe, switch_off, training set), A-to-B and A-to-C trained once; switch rows for those two only."""

@@ -13,6 +13,8 @@ def test_slide_loop_envs_worst_case_keeps_the_largest_rounds():
     assert slide_loop_envs({"a": 1}, 2, 2, max_rounds=0) == [2, 2]
     # tpe: each round's asks come in `batches` sequential batches (2 asks per remaining effect each)
     assert slide_loop_envs({"a": 2, "b": 2}, 3, 2, max_rounds=2, batches=3) == [3, 2, 12, 12, 12, 2, 6, 6, 6, 2]
+    # the inner gate: per round `batches` more batches of its own envs (tries x folds x asks x fitted trials)
+    assert slide_loop_envs({"a": 2}, 3, 2, max_rounds=1, batches=2, gate_envs=18) == [3, 2, 6, 6, 18, 18, 2]
 
 
 def test_twin_seconds_fits_frames_times_a_plus_b_envs():

@@ -266,8 +266,17 @@ JUDGE_TWINS = ["calibrated", "photo_loop"] + [f"slide_loop_{f}" for f in JUDGE_F
 # recipe than the main sweep's, photo_loop trains here too instead of reusing the sweep's runs (docs/loop.md)
 JUDGE_RECIPE = JUDGE.get("recipe") or TRAIN["recipe"]
 JUDGE_OWN_PHOTO = JUDGE_RECIPE != TRAIN["recipe"]
-JUDGE_TRAINED = (["calibrated"] + (["photo_loop"] if JUDGE_OWN_PHOTO else [])
-                 + [f"slide_loop_{f}" for f in JUDGE_FOLDS])  # runs judge.smk trains (else photo_loop: the sweep's)
+# judge.reuse: {twin: {fit: <dir>/twin_fit/fitted.yaml, runs: <runs root>}}: a candidate's fitted twin and trained
+# runs taken as they are (an earlier run's, workflow/scripts/judge_reuse.py), so neither is refitted nor retrained;
+# only what changed (e.g. the slide loop) reruns (docs/loop.md "Paper-profile run")
+JUDGE_REUSE = JUDGE.get("reuse") or {}
+for _twin, _spec in JUDGE_REUSE.items():
+    if _twin not in JUDGE_TWINS or not isinstance(_spec, dict) or set(_spec) != {"fit", "runs"}:
+        raise ValueError(f"config judge.reuse.{_twin}: need a candidate of {JUDGE_TWINS} with keys fit and runs, "
+                         f"got {_spec!r} (workflow/profiles/paper/judge_reuse.yaml shows the form)")
+JUDGE_TRAINED = [t for t in (["calibrated"] + (["photo_loop"] if JUDGE_OWN_PHOTO else [])
+                             + [f"slide_loop_{f}" for f in JUDGE_FOLDS])
+                 if t not in JUDGE_REUSE]  # runs judge.smk trains (else photo_loop: the sweep's; reused: as given)
 JUDGE_RUN = str(run_dir(f"{JUDGE_DIR}/train/{{twin}}", "{exp}", "{clip_len}", "{seed}"))
 JUDGE_EXPERIMENTS = ["A-to-B", "A-to-C"]  # Sim -> Silicone (cross-fitted), Sim -> Meat: both train on Sim
 JUDGE_FILES = (
@@ -277,6 +286,8 @@ JUDGE_FILES = (
 
 
 def judge_fit(twin):
+    if twin in JUDGE_REUSE:
+        return JUDGE_REUSE[twin]["fit"]
     if twin == "calibrated":
         return rules.calibrate.output.fit
     if twin == "photo_loop":
@@ -285,6 +296,8 @@ def judge_fit(twin):
 
 
 def judge_runs_root(twin):
+    if twin in JUDGE_REUSE:
+        return JUDGE_REUSE[twin]["runs"]
     return TRAIN_DIR if twin == "photo_loop" and not JUDGE_OWN_PHOTO else f"{JUDGE_DIR}/train/{twin}"
 
 

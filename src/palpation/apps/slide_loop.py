@@ -3,7 +3,8 @@
 Reads a sequence set (`sequences`), keeps `trials` and `frames`, and runs loop.slide_loop with the twin
 of the real scene (loop.slides). Writes `out.csv` (one row per fold and round: fold, round, effect_added,
 mae_fit_px, mae_heldout_px, vessel_ratio_sim, vessel_ratio_real: the MAE of marker motion about each
-trial's median; mae_abs_heldout_px: the absolute error) and `out.json` (parameters per round).
+trial's median; then mae_abs_heldout_px: the absolute error, at_bounds, and the inner gate's mae_inner_cv_px and
+gate_p) and `out.json` (parameters per round, every gated try under `gate`).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from palpation.config_check import app_main
 from palpation.io import csv_text, save_json, save_text
+from palpation.loop.slide_gate import GateSettings
 from palpation.loop.slide_loop import COLUMNS, SearchSettings, SlideLoopSettings, run_slide_loop
 from palpation.loop.slides import frame_mae, frame_mae_abs, make_scene, replay
 from palpation.measured_sequences import SequenceSet, load_sequence_set
@@ -52,7 +54,8 @@ def run(cfg: DictConfig) -> dict:
     settings = SlideLoopSettings(effects=grid, base=OmegaConf.to_container(cfg.base, resolve=True),
                                  max_rounds=int(cfg.max_rounds),
                                  min_improvement_px=float(cfg.min_improvement_px),
-                                 search=SearchSettings(**OmegaConf.to_container(cfg.search, resolve=True))).validate()
+                                 search=SearchSettings(**OmegaConf.to_container(cfg.search, resolve=True)),
+                                 gate=GateSettings(**OmegaConf.to_container(cfg.gate, resolve=True))).validate()
     lead_in = float(cfg.lead_in_mm)
     if lead_in < 0:
         raise ValueError(f"conf/slide_loop.yaml: lead_in_mm = {lead_in} must be >= 0 (mm slid in before frame 0)")

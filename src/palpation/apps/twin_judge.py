@@ -6,7 +6,7 @@ task=slides    -> `out.json` + `out.npz`: the composed twin (twin=..., +twin_fit
                  Silicone slides of the slide loop's cut it never saw (all of them, or the other fold's
                  with `fold`): per-trial motion MAE px and over-/off-vessel ratios, sim markers.
 task=table     -> `out.csv` + `out.md` (report.twin_selection: one row per candidate, `chosen` by the held-out
-                 slide MAE), `out.figure` (.png/.pdf: real vs the chosen twin's motion over one trial).
+                 slide MAE with the tie rule: simplest first), `out.figure` (.png/.pdf: real vs the chosen twin's motion over one trial).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from palpation.measured_sequences import load_sequence_set
 from palpation.metrics.scores import load_scores
 from palpation.report.markdown import markdown
 from palpation.report.runs import run_dir
-from palpation.report.twin_selection import COLUMNS, Candidate, Member, selection_table
+from palpation.report.twin_selection import COLUMNS, TIE_ALPHA, TIE_TEST, Candidate, Member, selection_table
 
 log = logging.getLogger(__name__)
 
@@ -99,14 +99,17 @@ def table(cfg: DictConfig) -> dict:
             twin=name, fitted_on=spec["fitted_on"], members=[_member(c, name, f, n_trials) for f in folds],
             heldout_slide_mae_px=float(np.mean(mae)) if mae else float("nan"),
             vessel_ratio_sim=float(np.mean([r["vessel_ratio_sim"] for r in reps])),
-            vessel_ratio_real=float(np.mean([r["vessel_ratio_real"] for r in reps]))))
+            vessel_ratio_real=float(np.mean([r["vessel_ratio_real"] for r in reps])),
+            trial_mae_px={int(t): float(m) for t, m in zip(trials, mae)}))
         log.info("%s: held-out slide motion MAE %.3f px over trials %s", name, candidates[-1].heldout_slide_mae_px,
                  sorted(trials))
-    df = selection_table(candidates)
+    df = selection_table(candidates)  # candidates in conf order: simplest first (the tie rule's order)
     save_text(c["out"]["csv"], csv_text(df.to_dict("records"), COLUMNS, 4, na_rep="nan"))
     rows = [[str(r[k]).replace("|", "/") if not isinstance(r[k], float) else f"{r[k]:.3f}" for k in COLUMNS]
             for r in df.to_dict("records")]
     note = f"Models: recipe {c['trained_with']}, every candidate alike.\n\n" if c.get("trained_with") else ""
+    note += (f"Choice: the simplest twin (rows top to bottom) unless a more complex one has a significantly lower "
+             f"held-out slide MAE ({TIE_TEST}, alpha {TIE_ALPHA:g}); `why` gives each row's test.\n\n")
     save_text(c["out"]["md"], f"# Twin on the task ({c['profile']} profile)\n\n{note}" + markdown(list(COLUMNS), rows))
     chosen = str(df.loc[df["chosen"], "twin"].iloc[0])
     _figure(c, chosen, replays[chosen])

@@ -36,17 +36,20 @@ ROBUST_SIM_JOB_S = 187.0
 
 
 def slide_loop_envs(candidates: dict[str, int], n_fit: int, n_held: int, max_rounds: int,
-                    batches: int = 1) -> list[int]:
+                    batches: int = 1, gate_envs: int = 0) -> list[int]:
     """Env counts of one fold's twin batches in the worst case (every round keeps an effect, the one with the
     fewest candidates, so the later rounds stay largest): round 0 fit and held-out, then per round `batches`
     sequential batches of the remaining candidates x the fitted trials (grid: 1 batch of every value; tpe:
-    `search.batches` of `search.per_batch` asks per effect) and the held-out replay of the kept twin."""
+    `search.batches` of `search.per_batch` asks per effect), the inner gate's `batches` batches of `gate_envs`
+    (tpe: tries x inner folds x per_batch x n_fit; 0 when off or grid, whose gate replays nothing) and the
+    held-out replay of the kept twin."""
     left = dict(candidates)
     envs = [n_fit, n_held]
     for _ in range(max_rounds):
         if not left:
             break
         envs += [sum(left.values()) * n_fit] * batches
+        envs += [gate_envs] * (batches if gate_envs else 0)
         left.pop(min(left, key=left.get))
         envs.append(n_held)
     return envs
@@ -91,8 +94,12 @@ def slide_work(profile: dict, sequences: str, mesh: str | None) -> dict:
         cands, batches = {e: len(next(iter(g.values()))) for e, g in cfg.effects.items()}, 1
     else:  # tpe: per round `batches` sequential batches of `per_batch` asks per remaining effect
         cands, batches = {e: int(search["per_batch"]) for e in cfg.effects}, int(search["batches"])
+    gate = cfg.get("gate") or {}
+    sizes = [len(v) for v in folds.values()]
+    gate_envs = [int(gate["tries"]) * min(int(gate.get("inner_folds") or n), n) * int(search["per_batch"]) * n
+                 if gate.get("inner") and search["sampler"] != "grid" and n >= 2 else 0 for n in sizes]
     return {"trials": numbers, "measured_frames": sub.n_frames, "replay_frames": frames, "candidates": cands,
-            "batches": batches, "sampler": search["sampler"], "lead_in_mm": lead,
+            "batches": batches, "gate_envs": gate_envs, "sampler": search["sampler"], "lead_in_mm": lead,
             "max_rounds": int(cfg.max_rounds), "fold_sizes": [len(v) for v in folds.values()]}
 
 
@@ -118,8 +125,8 @@ def budget(profile: str, sequences: str, mesh: str | None = None) -> dict:
         return REPLAY_FACTOR * f * (a + b * envs)
 
     n_fit, n_held = work["fold_sizes"]
-    loop_envs = [slide_loop_envs(work["candidates"], *sizes, work["max_rounds"], work["batches"])
-                 for sizes in ((n_fit, n_held), (n_held, n_fit))]
+    loop_envs = [slide_loop_envs(work["candidates"], *sizes, work["max_rounds"], work["batches"], g)
+                 for sizes, g in zip(((n_fit, n_held), (n_held, n_fit)), work["gate_envs"])]
     env_frames = f * sum(map(sum, loop_envs))
     measured_loop = f * a * sum(map(len, loop_envs)) + env_frames * MEASURED_S_PER_ENV_FRAME
     sim_set = SIM_FRAMES * (a + b * 2 * profile["dataset"]["n_pairs"])

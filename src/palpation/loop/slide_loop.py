@@ -11,6 +11,9 @@ effect's parameters on the fitted trials and keeps the best effect if it lowers 
   starts if it lists fewer), the later ones are TPE's;
 * `grid`: the effects' value lists (value i of every list of one effect is candidate i), one twin batch.
 Which effect and value are chosen uses the fitted trials only; the held-out trials and the labels only score.
+The inner gate (`gate.inner`, loop.slide_gate): the best `gate.tries` effects by fitted MAE are searched again
+once per inner fold of the fitting fold's trials (leave one trial out), each fit scored on the trials it left
+out; the best-ranked effect whose left-out trials improve significantly (paired test) is kept, else none.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import numpy as np
 import optuna
 
 from palpation.loop.folds import other, trial_folds
+from palpation.loop.slide_gate import GateSettings, inner_splits, verdict
 from palpation.loop.slides import SCENE_PARAMETERS, SCHEDULE_KEYS, frame_mae, frame_mae_abs, slide_modes, vessel_ratio
 from palpation.measured_sequences import SequenceSet
 from palpation.twin.parameters import PARAMETERS
@@ -30,8 +34,9 @@ from palpation.twin.parameters import PARAMETERS
 log = logging.getLogger(__name__)
 # mae_*: marker motion about each trial's median (loop.slides.frame_mae); mae_abs_heldout_px: the absolute error
 # at_bounds: the kept parameters at a physical bound ("; "-joined), a symptom (slide_loop.at_bounds)
+# mae_inner_cv_px, gate_p: the inner gate's mean left-out MAE of the kept effect and its paired test's p (nan: off)
 COLUMNS = ("fold", "round", "effect_added", "mae_fit_px", "mae_heldout_px", "vessel_ratio_sim", "vessel_ratio_real",
-           "mae_abs_heldout_px", "at_bounds")
+           "mae_abs_heldout_px", "at_bounds", "mae_inner_cv_px", "gate_p")
 Evaluate = Callable[[SequenceSet, list[dict]], tuple[np.ndarray, np.ndarray]]  # -> markers (C,T,F,127,2), failed (C,T)
 SAMPLERS = ("tpe", "grid")
 
@@ -56,6 +61,7 @@ class SlideLoopSettings:
     max_rounds: int = 3
     min_improvement_px: float = 0.05
     search: SearchSettings = field(default_factory=SearchSettings)
+    gate: GateSettings = field(default_factory=GateSettings)
 
     def validate(self, where: str = "conf/slide_loop.yaml") -> "SlideLoopSettings":
         known = {p.name for p in PARAMETERS.values() if p.per_env} | set(SCHEDULE_KEYS)
@@ -80,6 +86,7 @@ class SlideLoopSettings:
         if s.sampler not in SAMPLERS or s.batches < 1 or s.per_batch < 1:
             raise ValueError(f"{where}: search.sampler must be one of {SAMPLERS} with search.batches >= 1 and "
                              f"search.per_batch >= 1, got {s}")
+        self.gate.validate(where)
         return self
 
 
@@ -89,10 +96,11 @@ def candidates_of(grid: dict[str, list[float]]) -> list[dict]:
 
 
 def _score(evaluate: Evaluate, sset: SequenceSet, cands: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+    """Markers and the per-trial motion MAE (C, T) of every candidate."""
     markers, failed = evaluate(sset, cands)
     mae = frame_mae(np.nan_to_num(markers, nan=1e6), sset)
     mae[failed] = np.inf  # a diverged twin never wins
-    return markers, mae.mean(axis=1)
+    return markers, mae
 
 
 def at_bounds(params: dict, rel: float = 0.02) -> list[str]:
@@ -117,7 +125,7 @@ def _round_grid(score, current: dict, remaining: list[str], settings: SlideLoopS
         for c in candidates_of(settings.effects[effect]):
             cands.append({**current, **c})
             owners.append(effect)
-    return cands, owners, (score(cands) if cands else np.zeros(0))
+    return cands, owners, (score(cands) if cands else np.zeros((0, 0)))
 
 
 def _round_tpe(score, current: dict, remaining: list[str], settings: SlideLoopSettings, seed: int):
@@ -141,25 +149,76 @@ def _round_tpe(score, current: dict, remaining: list[str], settings: SlideLoopSe
                 cands.append({**current, **c})
                 owners.append(effect)
         mae = score(cands[-len(asked):])
-        for (effect, trial), m in zip(asked, mae):
+        for (effect, trial), m in zip(asked, mae.mean(axis=1)):
             studies[effect].tell(trial, float(m) if np.isfinite(m) else 1e9)
         maes.append(mae)
-    return cands, owners, np.concatenate(maes) if maes else np.zeros(0)
+    return cands, owners, np.concatenate(maes) if maes else np.zeros((0, 0))
+
+
+def _inner_grid(mat: np.ndarray, owners: list[str], effects: list[str], splits) -> dict[str, np.ndarray]:
+    """grid: per inner fold, the effect's value with the best MAE on the trials kept in, scored on those left out
+    (every value was already replayed on every fitted trial: no twin call)."""
+    out = {}
+    for e in effects:
+        rows = mat[[i for i, o in enumerate(owners) if o == e]]
+        per = np.full(mat.shape[1], np.inf)
+        for left in splits:
+            per[left] = rows[int(np.argmin(np.delete(rows, left, axis=1).mean(axis=1)))][left]
+        out[e] = per
+    return out
+
+
+def _inner_tpe(score, current: dict, effects: list[str], splits, settings: SlideLoopSettings,
+               seed: int) -> dict[str, np.ndarray]:
+    """tpe: every (effect, inner fold) searched as the round's search does (same batches, asks and first values,
+    its own seeded study) on the trials kept in, all in `search.batches` twin calls; each candidate is replayed on
+    every fitted trial so the left-out ones are scored by the best fit that did not see them."""
+    s = settings.search
+    studies = {}
+    for i, e in enumerate(effects):
+        for j in range(len(splits)):
+            st = optuna.create_study(sampler=optuna.samplers.TPESampler(
+                seed=seed + 7919 * i + 104729 * (j + 1), n_startup_trials=s.per_batch, multivariate=True))
+            for c in candidates_of(settings.effects[e])[:s.per_batch]:
+                st.enqueue_trial(c)
+            studies[(e, j)] = st
+    best = {key: (np.inf, None) for key in studies}
+    for _ in range(s.batches):
+        asked, cands = [], []
+        for key, st in studies.items():
+            for _ in range(s.per_batch):
+                trial = st.ask()
+                cands.append({**current, **{n: trial.suggest_float(n, bounds_of(n).low, bounds_of(n).high,
+                                                                   log=bounds_of(n).log)
+                                            for n in settings.effects[key[0]]}})
+                asked.append((key, trial))
+        for (key, trial), row in zip(asked, score(cands)):
+            m = float(np.delete(row, splits[key[1]]).mean())
+            studies[key].tell(trial, m if np.isfinite(m) else 1e9)
+            if m < best[key][0]:
+                best[key] = (m, row)
+    out = {e: np.full(sum(map(len, splits)), np.inf) for e in effects}
+    for (e, j), (_, row) in best.items():
+        if row is not None:
+            out[e][splits[j]] = row[splits[j]]
+    return out
 
 
 def run_fold(evaluate: Evaluate, fit: SequenceSet, held: SequenceSet, settings: SlideLoopSettings,
-             fold: str) -> tuple[list[dict], list[dict]]:
-    """Rows of one fold (round 0 = the base twin) and the parameters after each round."""
+             fold: str) -> tuple[list[dict], list[dict], list[dict]]:
+    """Rows of one fold (round 0 = the base twin), the parameters after each round and the inner gate's tries."""
     current = dict(settings.base)
     real_ratio = vessel_ratio(held.markers, held.labels)
+    gate, nan = settings.gate, float("nan")
 
-    def row(k: int, effect: str, mae_fit: float) -> dict:
+    def row(k: int, effect: str, mae_fit: float, v: dict | None) -> dict:
         m_held, mae_held = _score(evaluate, held, [current])
         r = {"fold": fold, "round": k, "effect_added": effect, "mae_fit_px": float(mae_fit),
-             "mae_heldout_px": float(mae_held[0]), "vessel_ratio_sim": vessel_ratio(m_held[0], held.labels),
+             "mae_heldout_px": float(mae_held[0].mean()), "vessel_ratio_sim": vessel_ratio(m_held[0], held.labels),
              "vessel_ratio_real": real_ratio, "modes_heldout": slide_modes(m_held[0], held),
              "mae_abs_heldout_px": float(frame_mae_abs(m_held[0], held).mean()),
-             "at_bounds": "; ".join(at_bounds({n: current[n] for n in searched}))}
+             "at_bounds": "; ".join(at_bounds({n: current[n] for n in searched})),
+             "mae_inner_cv_px": v["mae_inner_cv_px"] if v else nan, "gate_p": v["p"] if v else nan}
         log.info("fold %s round %d (%s): motion MAE fit %.3f px, held-out %.3f px (absolute %.3f px), "
                  "vessel ratio sim %.3f / real %.3f%s", fold, k, effect, r["mae_fit_px"], r["mae_heldout_px"],
                  r["mae_abs_heldout_px"], r["vessel_ratio_sim"], real_ratio,
@@ -169,40 +228,71 @@ def run_fold(evaluate: Evaluate, fit: SequenceSet, held: SequenceSet, settings: 
     def score(cands: list[dict]) -> np.ndarray:
         return _score(evaluate, fit, cands)[1]
 
-    _, mae0 = _score(evaluate, fit, [current])
+    now = score([current])[0]  # the current twin's per-trial fitted MAE: the gate's "before"
     searched: list[str] = []  # the kept effects' parameters (a base value switched off is no symptom)
-    rows, params = [row(0, "none", mae0[0])], [dict(current)]
+    rows, params, tries = [row(0, "none", now.mean(), None)], [dict(current)], []
     remaining = list(settings.effects)
+    splits = inner_splits(fit.n_trials, gate.inner_folds)
     for k in range(1, settings.max_rounds + 1):
         if not remaining:
             break
+        # a fold's seed differs from the other's and every round's from the last
+        seed = settings.search.seed + 1000 * k + (0 if fold == "odd" else 500)
         if settings.search.sampler == "grid":
-            cands, owners, mae = _round_grid(score, current, remaining, settings)
-        else:  # a fold's seed differs from the other's and every round's from the last
-            seed = settings.search.seed + 1000 * k + (0 if fold == "odd" else 500)
-            cands, owners, mae = _round_tpe(score, current, remaining, settings, seed)
-        best = int(np.argmin(mae))
-        if not mae[best] < rows[-1]["mae_fit_px"] - settings.min_improvement_px:
+            cands, owners, mat = _round_grid(score, current, remaining, settings)
+        else:
+            cands, owners, mat = _round_tpe(score, current, remaining, settings, seed)
+        mae = mat.mean(axis=1)
+        best_of: dict[str, int] = {}
+        for i, o in enumerate(owners):
+            if o not in best_of or mae[i] < mae[best_of[o]]:
+                best_of[o] = i
+        ranked = [e for e in sorted(best_of, key=lambda e: mae[best_of[e]])
+                  if mae[best_of[e]] < rows[-1]["mae_fit_px"] - settings.min_improvement_px]
+        if not ranked:
+            best = int(np.argmin(mae))
             log.info("fold %s round %d: no effect lowers the fitted MAE by %.3f px (best %s %.3f); stop",
                      fold, k, settings.min_improvement_px, owners[best], mae[best])
             break
-        current = cands[best]
-        remaining.remove(owners[best])
-        searched += list(settings.effects[owners[best]])
-        rows.append(row(k, owners[best], mae[best]))
+        kept, kept_v = ranked[0], None
+        if gate.inner:  # the best `tries` effects, each fitted without every trial in turn (loop.slide_gate)
+            tried = ranked[:gate.tries]
+            inner = (_inner_grid(mat, owners, tried, splits) if settings.search.sampler == "grid" else
+                     _inner_tpe(score, current, tried, splits, settings, seed + 250)) if splits else {}
+            kept = None
+            for e in tried:
+                # no inner fold (a fold of one trial): nothing can be left out, so nothing is shown and it is refused
+                v = verdict(now, inner.get(e, np.full(len(now), np.nan)), gate, settings.min_improvement_px)
+                tries.append({"fold": fold, "round": k, "effect": e, "mae_fit_px": float(mae[best_of[e]]), **v})
+                log.info("fold %s round %d gate %s: fitted %.3f px; left-out trials %.3f -> %.3f px (%s test p %.3g,"
+                         " alpha %g, %d trials): %s", fold, k, e, mae[best_of[e]], v["mae_before_px"],
+                         v["mae_inner_cv_px"], gate.test, v["p"], gate.alpha, v["n_trials"],
+                         "kept" if v["passed"] and kept is None else "passed" if v["passed"] else "refused")
+                if v["passed"] and kept is None:
+                    kept, kept_v = e, v
+            if kept is None:
+                log.info("fold %s round %d: the inner gate refuses %s (no left-out improvement beyond its noise); "
+                         "stop", fold, k, tried)
+                break
+        i = best_of[kept]
+        current, now = cands[i], mat[i]
+        remaining.remove(kept)
+        searched += list(settings.effects[kept])
+        rows.append(row(k, kept, mae[i], kept_v))
         params.append(dict(current))
-    return rows, params
+    return rows, params, tries
 
 
 def run_slide_loop(evaluate: Evaluate, sset: SequenceSet, settings: SlideLoopSettings,
                    trial_numbers: list[int]) -> dict:
     """Both folds: rows (COLUMNS), per-fold parameters per round, and the folds' trial numbers."""
     folds = trial_folds(trial_numbers)
-    rows, params = [], {}
+    rows, params, gate = [], {}, []
     for fold, idx in folds.items():
         fit, held = sset.subset(idx), sset.subset(folds[other(fold)])
-        fold_rows, fold_params = run_fold(evaluate, fit, held, settings, fold)
+        fold_rows, fold_params, tries = run_fold(evaluate, fit, held, settings, fold)
         rows += fold_rows
         params[fold] = fold_params
-    return {"rows": rows, "params": params,
+        gate += tries
+    return {"rows": rows, "params": params, "gate": gate,
             "folds": {f: [trial_numbers[i] for i in idx] for f, idx in folds.items()}}

@@ -42,7 +42,7 @@ def slide_loop_rounds(rounds: pd.DataFrame) -> tuple[str, list[str]]:
     rows = [[r["fold"], int(r["round"]), r["effect_added"], num(r["mae_fit_px"], 3), num(r["mae_heldout_px"], 3),
              f"{num(r['vessel_ratio_sim'], 2)} / {num(r['vessel_ratio_real'], 2)}"] for _, r in rounds.iterrows()]
     bullets = []
-    for fold, g in rounds.sort_values("round").groupby("fold", sort=False):
+    for fold, g in rounds.sort_values("round", kind="stable").groupby("fold", sort=False):
         first, last = float(g["mae_heldout_px"].iloc[0]), float(g["mae_heldout_px"].iloc[-1])
         added = ", ".join(e for e in g["effect_added"].iloc[1:]) or "nothing"
         change = f" ({100 * (last / first - 1):+.0f} %)" if first > 0 else ""
@@ -68,7 +68,11 @@ def twin_selection_section(df: pd.DataFrame, rounds: pd.DataFrame | None = None)
             "Silicone is cross-fitted: each trial is scored only by models whose twin never saw it (the slide "
             "loop's fold-odd twin scores the even trials and back), pooled over the 10 trials. The held-out slide "
             "MAE is the error of marker motion about each trial's median on real slides the twin was not fitted "
-            "on; the `chosen` twin has the lowest (no test label is used). Figure: `judge/slide_motion.png`.\n\n"
+            "on. The choice (no test label is used) keeps the simplest twin (rows top to bottom) unless a more "
+            "complex one has a significantly lower held-out MAE, paired by trial (one-sided Wilcoxon signed-rank, "
+            "alpha 0.05; `twin_selection.csv` column `why`). The slide loop keeps an effect only if its fits that "
+            "left out a trial of the fitting fold score that trial better (paired test; docs/loop.md \"Slides\"). "
+            "Figure: `judge/slide_motion.png`.\n\n"
             + markdown(["Twin", "Fitted on", "Held-out slide MAE (px)", "Vessel ratio sim / real",
                         "Silicone AP (x-fit)", "Silicone AUROC (x-fit)", "Meat AP", "Meat AUROC",
                         "Silicone positive at 0.5", "Seeds", "Chosen"], rows))

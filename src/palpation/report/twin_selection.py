@@ -5,7 +5,9 @@ cross-fitted: a Silicone trial counts only from models whose twin never saw it. 
 of one fold (slide_loop, per fold) scores the other fold's trials; the pooled 10-trial AP/AUROC then come from
 the two fold twins' models together. A twin fitted on no Silicone trial (calibrated, photo_loop) scores all.
 Meat is never fitted on: every model of a candidate scores it. The choice uses the held-out real-slide
-motion MAE only (a physics criterion, no test label): the candidate with the lowest one is `chosen`.
+motion MAE only (a physics criterion, no test label), with a pre-registered tie rule (`choose`): the candidates
+come simplest first (calibrated < photo_loop < slide_loop) and the simplest is kept unless a more complex one is
+significantly better, trial by trial (one-sided Wilcoxon signed-rank over the Silicone trials, alpha 0.05).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 from sklearn.metrics import average_precision_score, roc_auc_score
 
 from palpation.markers.lattice import N_MARKERS
@@ -21,7 +24,12 @@ from palpation.metrics.scores import Scores
 
 COLUMNS = ("twin", "fitted_on", "heldout_slide_mae_px", "vessel_ratio_sim", "vessel_ratio_real",
            "silicone_ap_crossfit", "silicone_auroc_crossfit", "meat_ap", "meat_auroc", "silicone_pos_share_05",
-           "seeds", "chosen")
+           "seeds", "chosen", "p_vs_simpler", "why")
+# The tie rule (docs/loop.md "Choice"): written after the 26 Nov paper run's detector scores were seen, so that run
+# is not a clean test of it; later runs are. Pre-registered here, not tuned: the usual 5 % level, the signed-rank
+# test because the per-trial MAE has outlying trials (Silicone trial 1: 3.6 px against ~1.5 px).
+TIE_ALPHA = 0.05
+TIE_TEST = "one-sided Wilcoxon signed-rank on the per-trial held-out slide MAE"
 
 
 @dataclass
@@ -40,6 +48,7 @@ class Candidate:
     heldout_slide_mae_px: float
     vessel_ratio_sim: float
     vessel_ratio_real: float
+    trial_mae_px: dict[int, float] | None = None  # 1-based Silicone trial -> held-out motion MAE (the tie rule's pairs)
 
 
 def _trial_of(scores: Scores) -> np.ndarray:
@@ -91,11 +100,49 @@ def candidate_row(c: Candidate) -> dict:
             "silicone_ap_crossfit": float(np.mean([a for a, _ in sil])),
             "silicone_auroc_crossfit": float(np.mean([r for _, r in sil])),
             "meat_ap": float(np.mean([a for a, _ in meat])), "meat_auroc": float(np.mean([r for _, r in meat])),
-            "silicone_pos_share_05": float(np.mean(share)), "seeds": len(seeds), "chosen": False}
+            "silicone_pos_share_05": float(np.mean(share)), "seeds": len(seeds), "chosen": False,
+            "p_vs_simpler": float("nan"), "why": ""}
 
 
-def selection_table(candidates: list[Candidate]) -> pd.DataFrame:
-    """One row per candidate; `chosen` on the lowest held-out slide motion MAE (test labels play no part)."""
+def better_p(simpler: dict[int, float], other: dict[int, float]) -> float:
+    """One-sided p that `other` has the lower held-out MAE, paired by trial (exact signed-rank for small n)."""
+    if sorted(simpler) != sorted(other):
+        raise ValueError(f"twin selection: the tie rule pairs trials, but the replays hold trials {sorted(simpler)} "
+                         f"and {sorted(other)}; rerun rule judge_slides so every candidate replays the same trials")
+    d = np.array([simpler[t] - other[t] for t in sorted(simpler)], float)
+    if d.size < 2 or not np.all(np.isfinite(d)) or not np.any(d):
+        return 1.0
+    return float(stats.wilcoxon(d, alternative="greater").pvalue)
+
+
+def choose(candidates: list[Candidate], alpha: float = TIE_ALPHA) -> tuple[int, list[float], list[str]]:
+    """The tie rule: candidates simplest first; the incumbent (at first the simplest) is replaced by a more complex
+    candidate only if that one is significantly better than it trial by trial (`better_p` < alpha). Returns the
+    chosen index and, per candidate, the p against the incumbent it met and why it was (not) chosen."""
+    ok = [i for i, c in enumerate(candidates) if c.trial_mae_px and np.isfinite(c.heldout_slide_mae_px)]
+    if not ok:
+        raise ValueError("twin selection: no candidate has a finite held-out slide MAE per trial to choose by")
+    best, ps, why = ok[0], [float("nan")] * len(candidates), [""] * len(candidates)
+    why[best] = "simplest twin with a held-out slide MAE; kept unless a more complex one is significantly better"
+    for i in ok[1:]:
+        inc = candidates[best]
+        ps[i] = better_p(inc.trial_mae_px, candidates[i].trial_mae_px)
+        n = len(inc.trial_mae_px)
+        if ps[i] < alpha:
+            why[best] += f"; replaced by {candidates[i].twin}"
+            why[i], best = f"significantly better than {inc.twin} (p {ps[i]:.3g} < {alpha:g}, {n} trials)", i
+        else:
+            why[i] = f"not significantly better than {inc.twin} (p {ps[i]:.3g} >= {alpha:g}, {n} trials)"
+    for i, c in enumerate(candidates):
+        if i not in ok:
+            why[i] = "no held-out slide MAE per trial"
+    why[best] = f"chosen: {why[best]} ({TIE_TEST}, alpha {alpha:g})"
+    return best, ps, why
+
+
+def selection_table(candidates: list[Candidate], alpha: float = TIE_ALPHA) -> pd.DataFrame:
+    """One row per candidate (simplest first); `chosen` by the held-out slide motion MAE with the tie rule
+    (`choose`); without per-trial MAE (older replays) the lowest mean. Test labels play no part."""
     if not candidates:
         raise ValueError("twin selection: no candidate twins")
     names = [c.twin for c in candidates]
@@ -105,5 +152,11 @@ def selection_table(candidates: list[Candidate]) -> pd.DataFrame:
     mae = table["heldout_slide_mae_px"].to_numpy(float)
     if not np.isfinite(mae).any():
         raise ValueError("twin selection: no candidate has a finite held-out slide MAE to choose by")
-    table.loc[int(np.nanargmin(mae)), "chosen"] = True
+    if all(c.trial_mae_px for c in candidates):
+        best, ps, why = choose(candidates, alpha)
+        table["p_vs_simpler"], table["why"] = ps, why
+    else:
+        best = int(np.nanargmin(mae))
+        table.loc[best, "why"] = "chosen: lowest mean held-out slide MAE (no per-trial MAE for the tie rule)"
+    table.loc[best, "chosen"] = True
     return table
