@@ -158,6 +158,8 @@ def test_results_page_section_checks_the_aims():
     bullets = twin_selection_section(df, rounds).bullets
     assert any(b.startswith("slide loop, fold odd") and "Symptom: E=2e+06 at its upper bound" in b for b in bullets)
     assert "slide loop, fold even: held-out motion MAE 5.000 -> 5.000 px (+0 %); added: nothing." in bullets
+    rounds["mae_inner_cv_px"], rounds["gate_p"] = [np.nan, 2.5, np.nan], [np.nan, 0.01, np.nan]  # the inner gate's
+    assert "| odd | 1 | stiffness | 2.000 | 3.000 | 1.20 / 1.30 | 2.500 | 0.010 |" in twin_selection_section(df, rounds).body
 
 
 def test_the_rule_s_table_overrides_compose():

@@ -39,8 +39,10 @@ def aim_checks(df: pd.DataFrame) -> list[tuple[str, str, float, str, float, floa
 
 def slide_loop_rounds(rounds: pd.DataFrame) -> tuple[str, list[str]]:
     """The slide loop's table (per fold and round) and one bullet per fold: held-out MAE first -> last round."""
+    gated = "mae_inner_cv_px" in rounds  # the inner gate's columns (loop.slide_loop COLUMNS), absent in older runs
     rows = [[r["fold"], int(r["round"]), r["effect_added"], num(r["mae_fit_px"], 3), num(r["mae_heldout_px"], 3),
-             f"{num(r['vessel_ratio_sim'], 2)} / {num(r['vessel_ratio_real'], 2)}"] for _, r in rounds.iterrows()]
+             f"{num(r['vessel_ratio_sim'], 2)} / {num(r['vessel_ratio_real'], 2)}"]
+            + ([num(r["mae_inner_cv_px"], 3), num(r["gate_p"], 3)] if gated else []) for _, r in rounds.iterrows()]
     bullets = []
     for fold, g in rounds.sort_values("round", kind="stable").groupby("fold", sort=False):
         first, last = float(g["mae_heldout_px"].iloc[0]), float(g["mae_heldout_px"].iloc[-1])
@@ -53,7 +55,8 @@ def slide_loop_rounds(rounds: pd.DataFrame) -> tuple[str, list[str]]:
     text = ("\n\nThe slide loop per fold and round (`loop_slides/loop_slides.csv`; each fold fitted on its trials, "
             "scored on the other fold's):\n\n"
             + markdown(["Fold", "Round", "Effect added", "MAE fit (px)", "MAE held-out (px)",
-                        "Vessel ratio sim / real (held-out)"], rows))
+                        "Vessel ratio sim / real (held-out)"]
+                       + (["MAE of left-out fold trials (inner gate, px)", "Gate p"] if gated else []), rows))
     return text, bullets
 
 
