@@ -151,3 +151,20 @@ def test_the_verdict_says_when_the_final_refit_stopped_at_its_cap(converged):
     p.final = {"refit": {"kept": 3, "starts": 1, "before": summ, "after": summ, "converged": converged}}
     text = "\n".join(verdict_lines(p, {"mean_px": 0.5, "target_mm": 0.25, "target_set": "measured_photos"}))
     assert ("stopped at loop.final_refit_iters" in text) == (not converged)
+
+
+@pytest.mark.parametrize("null", [True, False])
+def test_the_null_try_is_finished_to_convergence(null):
+    # 60-run self-test at 78096aa: the tries after the null start from its end point and take more LM steps from
+    # there, so with an unconverged null an extra effect passed the gate on those steps alone (8 spurious third
+    # effects). loop.null_converge: the round's null tries (named by the engine) go on to final_refit_iters steps.
+    cfg = LoopConfig(polish_iters=1, final_refit_iters=10).validate()
+    p = valley_problem()
+    p.trust = {}
+    fits = {"v": {"ranked": [dict(p.params)]}}
+    engine.finish(cfg, [p], fits, simulate_valley, (), {"v"} if null else ())
+    evaluate([p], simulate_valley)
+    noise_mae = NOISE * np.sqrt(np.pi / 2)
+    assert fits["v"]["polish"]["converged"] == null
+    assert (p.summary()["fit"] < 1.2 * noise_mae) == null
+    assert (abs(p.params["shell_ratio"] - 2.0) < 0.05) == null

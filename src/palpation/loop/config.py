@@ -81,6 +81,10 @@ class LoopConfig:
     # a set's search also starts from the end point of every subset of it tried earlier in the round (the null
     # try's: the empty set), so a larger set fits at least as well as what it contains (loop.refit.subset_starts)
     nested_starts: bool = True
+    # the null try's finish goes on to final_refit_iters LM steps (the final refit's convergence) while still
+    # descending: the tries after it start from its end point, so an unconverged null lets an extra effect pass
+    # the gate on the optimiser's extra steps alone (loop.engine.finish)
+    null_converge: bool = True
     # up to final_refit_iters LM steps; a chain stops earlier once a step gains < 0.1 % (loop.polish.MIN_GAIN).
     # 3 left the 60-run H200 self-test's contact + camera finals still descending (1.63 -> 1.08 px in 3 steps)
     final_refit_iters: int = 10

@@ -295,7 +295,8 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                 p.params.update(fits[p.name]["params"])
             # every try (null too) at its local optimum; a try that adds the camera also from its best other basin
             finish(cfg, [*trying, *extra], fits, simulate,
-                   {p.name for p in trying if "camera" in queue[p.name][attempt]["effects"]})
+                   {p.name for p in trying if "camera" in queue[p.name][attempt]["effects"]},
+                   {q.name for q in extra} if cfg.null_converge else ())
             diverged = evaluate([*trying, *extra], simulate, strict=False)
             for q in extra:  # a diverged null try leaves the previous twin as the only reference
                 nulls[q.name[:-len(NULL)]] = None if q.name in diverged else (q.summary(), q.markers, fits[q.name])
@@ -328,7 +329,8 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                     ok0, why0 = decide(n_sum, a, ev0, cfg.min_improvement_px, cfg.min_improvement_rel,
                                        cfg.gate_fit_rel, cfg.gate_z)
                     after["gate_null"] = {**ev0, "why": why0, "fit": n_sum["fit"], "heldout": n_sum["heldout"],
-                                          "params": n_fit["params_final"]}
+                                          "params": n_fit["params_final"],
+                                          "converged": n_fit.get("polish", {}).get("converged")}
                     if ok and not ok0:
                         why = f"{why}; but not beyond re-fitting alone (null try: {why0})"
                     ok = ok and ok0
@@ -360,11 +362,13 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
     rounds.close()
 
 
-def finish(cfg: LoopConfig, problems: list[Problem], fits: dict[str, dict], simulate, basins=()) -> None:
+def finish(cfg: LoopConfig, problems: list[Problem], fits: dict[str, dict], simulate, basins=(),
+           converge=()) -> None:
     """The local least-squares finish of each problem's search (loop.polish), from its best distinct trials
     (and, for the problems named in `basins`, the camera's best other basin: loop.basins); fits[name] gains
     `polish` (fitted MAE before/after), `params_final` and `starts` (the next-best distinct trials the final
-    refit also starts from) in place of the search's ranked trials."""
+    refit also starts from) in place of the search's ranked trials. The problems named in `converge` (the
+    round's null tries, loop.null_converge) go on to final_refit_iters steps in all while still descending."""
     limits = {p.name: {**cfg.search.bounds, **p.trust} for p in problems}
     starts = {p.name: distinct_starts(fits[p.name].pop("ranked"), p.searched, limits[p.name],
                                       max(cfg.polish_starts, cfg.final_refit_starts)) for p in problems}
@@ -379,6 +383,17 @@ def finish(cfg: LoopConfig, problems: list[Problem], fits: dict[str, dict], simu
                  next(iter(done.values()))["jobs_all"] if done else 0,
                  np.nanmean([d.get("fit_start", np.nan) for d in done.values()]),
                  np.nanmean([d.get("fit_end", np.nan) for d in done.values()]))
+        # The tries after the null start from its end point (nested starts) and take more steps from there: an
+        # extra effect then wins by the optimiser's extra steps, not by what it models, unless the null try too
+        # is at its optimum (60-run self-test, 26 Nov: 8 spurious third effects, docs/loop.md).
+        going = [p for p in problems if p.name in converge and not done[p.name]["converged"]]
+        more = cfg.final_refit_iters - cfg.polish_iters
+        if going and more > 0:
+            cont = polish(going, {p.name: [dict(p.params)] for p in going}, simulate, limits, more)
+            for p in going:
+                c = cont[p.name]
+                done[p.name].update(fit_end=c.get("fit_end", done[p.name].get("fit_end")), converged=c["converged"],
+                                    kept=done[p.name]["kept"] + c["kept"])
     for p in problems:
         fits[p.name]["params_final"] = dict(p.params)
         fits[p.name]["starts"] = starts[p.name][1:cfg.final_refit_starts]  # the best: the twin continues from it
