@@ -1,8 +1,9 @@
 # Sourced by the device scripts (gpu_judge.sh, gpu_recipe_ablation.sh, gpu_loop_selftest.sh; gpu_twin_checks.sh for
-# device_check_warp alone): one resumable, detached run on the lent device. The device kills a command's processes
-# at its 10-min limit, so the run lives in its own process session (setsid) and outlives the command; LIMIT_S (default 0: until done) is how long a call
-# waits for it. The same command again re-attaches to a run still going (OUTDIR/NAME.pid) or, once it ended,
-# starts the next one, which resumes (Snakemake keeps finished jobs and redoes a cut one; the loop's studies go on).
+# device_check_warp alone): one resumable, detached run on the lent device. The device kills a command's processes at
+# its 10-min limit, so the run lives in its own process session (setsid) and outlives the command; LIMIT_S (default 0:
+# until done) is how long a call waits for it. The same command again re-attaches to a run still going
+# (OUTDIR/NAME.pid) or, once it ended, starts the next one, which resumes (Snakemake keeps finished jobs and redoes a
+# cut one; the loop's studies go on).
 #   device_attach OUT NAME          status 0, DEVICE_PID set: a run is still going (a second call never starts one)
 #   device_unlock WHO PROFILE       a killed Snakemake's lock is taken over; exit 4 while another Snakemake runs here
 #   device_touch_mesh PROFILE       the carried mesh newer than its conf, so rule mesh (gmsh) never reruns
