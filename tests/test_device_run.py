@@ -4,6 +4,7 @@ another, and the run's exit status comes back once it ends."""
 
 import os
 import subprocess
+import sys
 
 from palpation.paths import REPO_ROOT
 
@@ -46,3 +47,27 @@ def test_unlock_refuses_while_another_snakemake_runs_here(tmp_path):
     assert out.returncode == 4 and "unlocked" not in out.stdout
     assert out.stderr.startswith(f"me: another Snakemake run (pid {other.pid}) holds this checkout's lock")
     assert (tmp_path / ".snakemake/locks/0.input.lock").exists()
+
+
+def check_warp(tmp_path, args: str, cuda_devices: str) -> subprocess.CompletedProcess:
+    """device_check_warp against a stand-in `warp` module (no Warp install or GPU needed) and this python3."""
+    (tmp_path / "warp.py").write_text(f"__version__ = '9.9'\ndef init(): pass\n"
+                                      f"def get_cuda_devices(): return {cuda_devices}\n")
+    (tmp_path / "bin").mkdir(exist_ok=True)
+    if not (tmp_path / "bin/python3").exists():
+        (tmp_path / "bin/python3").symlink_to(sys.executable)
+    env = {**os.environ, "PYTHONPATH": str(tmp_path), "PATH": f"{tmp_path / 'bin'}:{os.environ['PATH']}"}
+    return subprocess.run(["bash", "-c", f"source {HELPER}; device_check_warp {args}; echo rc=$?"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=30, env=env)
+
+
+def test_check_warp_prints_the_devices_and_refuses_cuda_without_one(tmp_path):
+    ok = check_warp(tmp_path, "me cpu json", "[]")
+    assert "warp 9.9 []" in ok.stdout and "rc=0" in ok.stdout
+    no_gpu = check_warp(tmp_path, "'me: the paper profile runs on cuda' cuda", "[]")
+    assert "rc=3" in no_gpu.stdout
+    assert "me: the paper profile runs on cuda, and Warp sees no CUDA device" in no_gpu.stderr
+    gpu = check_warp(tmp_path, "me cuda", "['cuda:0']")
+    assert "warp 9.9 ['cuda:0']" in gpu.stdout and "rc=0" in gpu.stdout
+    missing = check_warp(tmp_path, "me cpu no_such_module", "[]")
+    assert "rc=3" in missing.stdout and "No module named 'no_such_module'" in missing.stderr

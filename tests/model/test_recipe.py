@@ -116,6 +116,13 @@ def test_calibrated_recipe_is_the_reference_plus_platt_only():
     assert differs == set(SWITCHES["calibration"]) and cal.calibration == "platt"
 
 
+def test_quick_recipe_is_calibrated_plus_ap_selection_only():
+    """recipe=quick (the quick profile's): calibrated, the checkpoint chosen by val AP; nothing else moves."""
+    cal, quick = _compose(["experiment=C-to-B", "recipe=calibrated"]), _compose(["experiment=C-to-B", "recipe=quick"])
+    differs = {f.name for f in dataclasses.fields(TrainConfig) if getattr(quick, f.name) != getattr(cal, f.name)}
+    assert differs == set(SWITCHES["select_ap"]) and quick.select_metric == "ap"
+
+
 def test_calibration_rescales_the_written_scores_only(train_sets, tmp_path):
     """calibration=platt: the same model (checkpoint bytes), scores = the fitted map of the raw ones."""
     from palpation.apps.train import run

@@ -1,14 +1,17 @@
-# Sourced by the device scripts (gpu_judge.sh, gpu_recipe_ablation.sh, gpu_loop_selftest.sh): one resumable,
-# detached run on the lent device. The device kills a command's processes at its 10-min limit, so the run lives
-# in its own process session (setsid) and outlives the command; LIMIT_S (default 0: until done) is how long a call
-# waits for it. The same command again re-attaches to a run still going (OUTDIR/NAME.pid) or, once it ended,
-# starts the next one, which resumes (Snakemake keeps finished jobs and redoes a cut one; the loop's studies go on).
+# Sourced by the device scripts (gpu_judge.sh, gpu_recipe_ablation.sh, gpu_loop_selftest.sh; gpu_twin_checks.sh for
+# device_check_warp alone): one resumable, detached run on the lent device. The device kills a command's processes at
+# its 10-min limit, so the run lives in its own process session (setsid) and outlives the command; LIMIT_S (default 0:
+# until done) is how long a call waits for it. The same command again re-attaches to a run still going
+# (OUTDIR/NAME.pid) or, once it ended, starts the next one, which resumes (Snakemake keeps finished jobs and redoes a
+# cut one; the loop's studies go on).
 #   device_attach OUT NAME          status 0, DEVICE_PID set: a run is still going (a second call never starts one)
 #   device_unlock WHO PROFILE       a killed Snakemake's lock is taken over; exit 4 while another Snakemake runs here
 #   device_touch_mesh PROFILE       the carried mesh newer than its conf, so rule mesh (gmsh) never reruns
 #   device_start OUT NAME CMD...    CMD detached: output appended to OUT/NAME.log, status to OUT/NAME.rc
 #   device_wait OUT NAME            wait; DEVICE_RC = the run's status, 75 while it still runs
 #   device_progress OUT NAME [N]    the log's last N (4) lines of progress
+#   device_check_warp WHO DEVICE [MODULE...]  import Warp (and MODULEs), print its version and CUDA devices;
+#                                   status 3 when an import fails, or when DEVICE is cuda and Warp sees no CUDA device
 
 device_attach() {
   DEVICE_PID=$(cat "$1/$2.pid" 2>/dev/null)
@@ -74,4 +77,13 @@ device_wait() {
 
 device_progress() {
   grep -E "steps \(|Nothing to be done|Error|Exiting|done in" "$1/$2.log" 2>/dev/null | tail -"${3:-4}"
+}
+
+device_check_warp() {
+  # one python3 process: the same interpreter the run will use, so a missing package shows before the run starts
+  local who=$1 device=$2 mods="" m
+  shift 2
+  for m in "$@"; do mods+=", $m"; done
+  python3 -c "import sys, warp as wp$mods; wp.init(); print('warp', wp.__version__, wp.get_cuda_devices())
+sys.exit('$who, and Warp sees no CUDA device' if '$device' == 'cuda' and not wp.get_cuda_devices() else 0)" || return 3
 }

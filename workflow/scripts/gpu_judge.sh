@@ -29,9 +29,7 @@ targets="results/judge/twin_selection.csv results/judge/twin_selection.md result
   results/judge/slide_motion.pdf results/loop_slides/loop_slides.csv"
 if ! device_attach "$out" snakemake; then  # one run at a time: a second call waits for the one going
   device=$(sed -n 's/^device: *\([a-z]*\).*/\1/p' "conf/workflow/$profile.yaml")
-  python3 -c "import sys, warp as wp, hydra, optuna, snakemake; wp.init(); print('warp', wp.__version__, wp.get_cuda_devices())
-sys.exit('gpu_judge: the $profile profile runs on cuda, and Warp sees no CUDA device' if '$device' == 'cuda' \
-and not wp.get_cuda_devices() else 0)" || exit 3
+  device_check_warp "gpu_judge: the $profile profile runs on cuda" "$device" hydra optuna snakemake || exit 3
   device_touch_mesh "$profile"
   # another Snakemake run in this checkout (e.g. gpu_recipe_ablation.sh) holds the lock: unlocking would let both
   # build the shared upstream files (Sim set, data sets) at once; the judge then needs its own copy of the checkout

@@ -23,7 +23,7 @@ done
 export PYTHONPATH="$PWD/src${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 mkdir -p "$out"
 if ! device_attach "$out" selftest; then
-  python3 -c "import warp as wp, hydra, optuna; wp.init(); print('warp', wp.__version__, wp.get_cuda_devices())" || exit 3
+  device_check_warp gpu_loop_selftest cpu hydra optuna || exit 3
   device_start "$out" selftest python3 -m palpation.apps.loop mode=selftest track=false progress=false twin.device=cuda \
     mesh="$mesh" measured="$measured" loop.selftest.runs_per_case="${RUNS:-5}" loop.split_by_kind=false \
     loop.final_refit_starts=3 loop.final_refit_iters=10 loop.compete=true loop.nested_starts=true loop.search.ask_workers="${ASK_WORKERS:-$(nproc)}" out.dir="$out" \

@@ -7,6 +7,7 @@
 # BENCH_ARGS (e.g. "--resolutions reference --n-envs 500", or "skip") and AGREE_ARGS ("--max-frames 100")
 # narrow the run when device time is short.
 set -uo pipefail
+source "$(dirname "${BASH_SOURCE[0]}")/device_run.sh"  # device_check_warp
 out=${1:-results/bench}
 mesh_dir=${MESH_DIR:-results/twin}
 mkdir -p "$out"
@@ -15,7 +16,7 @@ for res in coarse reference; do
     "run \`snakemake results/twin/mesh_$res.npz\` where gmsh is, copy it here or set MESH_DIR" >&2; exit 2; }
 done
 export PYTHONPATH="$PWD/src${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1 PALPATION_MESH_CACHE="$mesh_dir"
-python3 -c "import warp as wp; wp.init(); print(wp.get_cuda_devices())"
+device_check_warp gpu_twin_checks cpu  # no exit: the checks below report their own failures
 if [ "${BENCH_ARGS:-}" != skip ]; then
   # shellcheck disable=SC2086
   python3 -m palpation.twin.benchmark --device cuda:0 --mesh-dir "$mesh_dir" ${BENCH_ARGS:-} \
