@@ -16,9 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from scipy import stats
 from sklearn.metrics import average_precision_score, roc_auc_score
 
+from palpation.loop.slide_gate import paired_p
 from palpation.markers.lattice import N_MARKERS
 from palpation.metrics.scores import Scores
 
@@ -109,10 +109,8 @@ def better_p(simpler: dict[int, float], other: dict[int, float]) -> float:
     if sorted(simpler) != sorted(other):
         raise ValueError(f"twin selection: the tie rule pairs trials, but the replays hold trials {sorted(simpler)} "
                          f"and {sorted(other)}; rerun rule judge_slides so every candidate replays the same trials")
-    d = np.array([simpler[t] - other[t] for t in sorted(simpler)], float)
-    if d.size < 2 or not np.all(np.isfinite(d)) or not np.any(d):
-        return 1.0
-    return float(stats.wilcoxon(d, alternative="greater").pvalue)
+    trials = sorted(simpler)
+    return paired_p([simpler[t] for t in trials], [other[t] for t in trials], "wilcoxon")
 
 
 def choose(candidates: list[Candidate], alpha: float = TIE_ALPHA) -> tuple[int, list[float], list[str]]:
