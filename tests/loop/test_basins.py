@@ -5,8 +5,9 @@ import pytest
 
 from palpation.loop.basins import CAM, camera_starts, nominal_steps, procrustes
 from palpation.loop.config import LoopConfig
-from palpation.loop.engine import Problem, finish, initial_params
+from palpation.loop.engine import Problem, initial_params
 from palpation.loop.inputs import Target
+from palpation.loop.refit import finish
 from palpation.loop.simulate import State
 from palpation.markers.template import rest_template
 

@@ -8,7 +8,7 @@ import palpation.loop.engine as engine
 from palpation.loop.config import LoopConfig, SearchSettings
 from palpation.loop.engine import Problem, evaluate, initial_params, run_rounds
 from palpation.loop.inputs import Target
-from palpation.loop.refit import converge, subset_starts
+from palpation.loop.refit import converge, finish, subset_starts
 from palpation.loop.simulate import State
 from palpation.markers.template import rest_template
 
@@ -162,7 +162,7 @@ def test_the_null_try_is_finished_to_convergence(null):
     p = valley_problem()
     p.trust = {}
     fits = {"v": {"ranked": [dict(p.params)]}}
-    engine.finish(cfg, [p], fits, simulate_valley, (), {"v"} if null else ())
+    finish(cfg, [p], fits, simulate_valley, (), {"v"} if null else ())
     evaluate([p], simulate_valley)
     noise_mae = NOISE * np.sqrt(np.pi / 2)
     assert fits["v"]["polish"]["converged"] == null

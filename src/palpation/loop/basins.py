@@ -14,7 +14,7 @@ current f and rotation:
 * the similarity A' that best maps that displacement onto the measured one over the fitted states is a
   closed-form least-squares (Procrustes) fit, and its residual ranks the grid point.
 The best grid point, A' composed with the current A, is one more start of the local finish (loop.polish,
-whose best chain wins by the fitted MAE). Only a try that adds the camera gets it (engine.finish's
+whose best chain wins by the fitted MAE). Only a try that adds the camera gets it (refit.finish's
 `basins`); one twin call per such finish, the search's best params' envs (n_fit per problem) and one binding
 per grid point (7 x 7 at the nominal 20 px over +-60 px: ~70 ms each on this loaded CPU).
 """

@@ -83,7 +83,7 @@ class LoopConfig:
     nested_starts: bool = True
     # the null try's finish goes on to final_refit_iters LM steps (the final refit's convergence) while still
     # descending: the tries after it start from its end point, so an unconverged null lets an extra effect pass
-    # the gate on the optimiser's extra steps alone (loop.engine.finish). Off until the 60-run self-test has
+    # the gate on the optimiser's extra steps alone (loop.refit.finish). Off until the 60-run self-test has
     # measured it (docs/loop.md: its device run was lost); the paper real-photo loop is the same either way
     null_converge: bool = False
     # up to final_refit_iters LM steps; a chain stops earlier once a step gains < 0.1 % (loop.polish.MIN_GAIN).

@@ -23,15 +23,13 @@ import numpy as np
 
 from palpation.calibration.objective import marker_mae_px
 from palpation.loop.attribution import Signature, attribute, fit_subset, joint_candidates
-from palpation.loop.basins import camera_starts, nominal_steps
 from palpation.loop.compete import Winner, enter
 from palpation.loop.config import LoopConfig
 from palpation.loop.effects import EFFECTS, PARAMS, Dof, bounds, clip, move
 from palpation.loop.gate import decide, heldout_z
 from palpation.loop.inputs import Target
 from palpation.loop.recalibrate import recalibrate
-from palpation.loop.polish import distinct_starts, polish
-from palpation.loop.refit import NULL, null_problem, subset_starts
+from palpation.loop.refit import NULL, finish, null_problem, subset_starts
 from palpation.progress import bar
 
 log = logging.getLogger(__name__)
@@ -360,45 +358,6 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
             on_round(k, problems)
         rounds.set_postfix_str(f"{sum(not p.done for p in problems)} of {len(problems)} going", refresh=False)
     rounds.close()
-
-
-def finish(cfg: LoopConfig, problems: list[Problem], fits: dict[str, dict], simulate, basins=(),
-           converge=()) -> None:
-    """The local least-squares finish of each problem's search (loop.polish), from its best distinct trials
-    (and, for the problems named in `basins`, the camera's best other basin: loop.basins); fits[name] gains
-    `polish` (fitted MAE before/after), `params_final` and `starts` (the next-best distinct trials the final
-    refit also starts from) in place of the search's ranked trials. The problems named in `converge` (the
-    round's null tries, loop.null_converge) go on to final_refit_iters steps in all while still descending."""
-    limits = {p.name: {**cfg.search.bounds, **p.trust} for p in problems}
-    starts = {p.name: distinct_starts(fits[p.name].pop("ranked"), p.searched, limits[p.name],
-                                      max(cfg.polish_starts, cfg.final_refit_starts)) for p in problems}
-    grid = camera_starts([p for p in problems if p.name in basins], simulate, limits, nominal_steps(cfg.steps)) \
-        if cfg.camera_basins else {}
-    for name, s in grid.items():  # the camera's best other basin as one more start (loop.basins)
-        starts[name] = [*starts[name][:cfg.polish_starts], s, *starts[name][cfg.polish_starts:]]
-    if cfg.polish_iters > 0:
-        done = polish(problems, {n: s[:cfg.polish_starts + (n in grid)] for n, s in starts.items()}, simulate,
-                      limits, cfg.polish_iters)
-        log.info("local finish of %d tries: %d twin jobs; fitted MAE %.3f -> %.3f px (mean)", len(problems),
-                 next(iter(done.values()))["jobs_all"] if done else 0,
-                 np.nanmean([d.get("fit_start", np.nan) for d in done.values()]),
-                 np.nanmean([d.get("fit_end", np.nan) for d in done.values()]))
-        # The tries after the null start from its end point (nested starts) and take more steps from there: an
-        # extra effect then wins by the optimiser's extra steps, not by what it models, unless the null try too
-        # is at its optimum (60-run self-test, 26 Nov: 8 spurious third effects, docs/loop.md).
-        going = [p for p in problems if p.name in converge and not done[p.name]["converged"]]
-        more = cfg.final_refit_iters - cfg.polish_iters
-        if going and more > 0:
-            cont = polish(going, {p.name: [dict(p.params)] for p in going}, simulate, limits, more)
-            for p in going:
-                c = cont[p.name]
-                done[p.name].update(fit_end=c.get("fit_end", done[p.name].get("fit_end")), converged=c["converged"],
-                                    kept=done[p.name]["kept"] + c["kept"])
-    for p in problems:
-        fits[p.name]["params_final"] = dict(p.params)
-        fits[p.name]["starts"] = starts[p.name][1:cfg.final_refit_starts]  # the best: the twin continues from it
-        if cfg.polish_iters > 0:
-            fits[p.name]["polish"] = done[p.name]
 
 
 def _record(k: int, p: Problem, item, att, before, after, accepted: bool) -> dict:

@@ -111,30 +111,31 @@ def _fit_mae(targets, block) -> float:
 
 
 def polish(problems: list, starts: Mapping[str, Sequence[Mapping[str, float]]], simulate,
-           limits: Mapping[str, Mapping | None], iters: int) -> dict[str, dict]:
+           limits: Mapping[str, Mapping | None], iters: int | Mapping[str, int]) -> dict[str, dict]:
     """Levenberg-Marquardt chains from every start of every problem, in lockstep (two twin batches per
     iteration over all chains). Sets each problem's params to its best chain's end point (p.markers are
     left for the caller to re-simulate on every state) and returns per problem the fitted MAE at the best
     start and at the end, the iterations kept, whether the best chain converged (False: stopped at `iters`
     while still descending) and the twin jobs of all chains together. The parameters
-    polished are p.searched, within limits[p.name] (loop.search.bounds and the problem's trust region)."""
+    polished are p.searched, within limits[p.name] (loop.search.bounds and the problem's trust region).
+    `iters`: the iteration cap, one for all or per problem name (a problem's chains stop at its own)."""
     chains = []
     for p in problems:
         fit = [t for t in p.targets if t.fit]
         for s in starts.get(p.name, [p.params]):
             x = {**p.params, **dict(s)}
             chains.append({"p": p, "fit": fit, "x": x, "base": None, "mae": np.inf, "kept": 0, "going": True,
-                           "converged": False,
+                           "converged": False, "cap": iters[p.name] if isinstance(iters, Mapping) else iters,
                            "u": units(p.searched, x, limits.get(p.name))})
     jobs_asked = 0
-    for it in range(iters + 1):
+    for it in range(max((c["cap"] for c in chains), default=0) + 1):
         live = [c for c in chains if c["going"]]
         if not live:
             break
         jobs, spans = [], []  # batch 1: the base (first time) and one column per unit
         for c in live:
             sets = ([] if c["base"] is not None else [("base", c["x"])])
-            if it < iters:
+            if it < c["cap"]:
                 for n in c["u"]:
                     sign = 1.0 if _fits_above(c["x"][n], c["u"][n]) else -1.0  # backward at an upper bound
                     sets.append((n, shifted(c["x"], c["u"], {n: sign}), sign))
@@ -154,7 +155,7 @@ def polish(problems: list, starts: Mapping[str, Sequence[Mapping[str, float]]], 
                     continue
                 c["base"], c["mae"] = blocks["base"][0], _fit_mae(c["fit"], blocks["base"][0])
                 c["mae0"] = c["mae"]
-            if it == iters:
+            if it == c["cap"]:
                 c["going"] = False
                 continue
             cols = [n for n in c["u"] if blocks.get(n) is not None]

@@ -13,7 +13,7 @@ contact fit left), and the final check reads it as unexplained. Two guards, both
   final twin and the last kept try's other distinct best trials, kept only if the fitted MAE falls and the
   held-out is not significantly worse, brings the final twin to its optimum, so the residual tested
   against the detector noise is what the twin cannot reach, not what the search left. Every try, the null
-  try included, gets the same local finish after its search (engine.finish), so the gate compares optima;
+  try included, gets the same local finish after its search (`finish`), so the gate compares optima;
 * the final refit also starts from the **last null try's end point** when the last round kept nothing: it is the
   same effect set re-fitted, and it was thrown away with the round (60-run H200 self-test, contact + mount run 31:
   the round-2 null try reached a held-out of 0.26 px, the final twin stayed at 1.84 px); within
@@ -36,7 +36,9 @@ import numpy as np
 from palpation.loop.attribution import Signature, fit_subset
 from palpation.loop.effects import clip, move
 from palpation.loop.gate import heldout_z
-from palpation.loop.polish import polish
+from palpation.loop.basins import camera_starts, nominal_steps
+from palpation.loop.config import LoopConfig
+from palpation.loop.polish import distinct_starts, polish
 
 log = logging.getLogger(__name__)
 NULL = "~null"  # suffix of a null try's problem name
@@ -105,3 +107,36 @@ def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_cri
                      log_[p.name]["after"]["fit"],
                      "" if log_[p.name]["converged"] else " (stopped at loop.final_refit_iters, not converged)")
     return log_
+
+
+def finish(cfg: LoopConfig, problems: list, fits: dict[str, dict], simulate, basins=(), converge=()) -> None:
+    """The local least-squares finish of each problem's search (loop.polish), from its best distinct trials
+    (and, for the problems named in `basins`, the camera's best other basin: loop.basins); fits[name] gains
+    `polish` (fitted MAE before/after), `params_final` and `starts` (the next-best distinct trials the final
+    refit also starts from) in place of the search's ranked trials. The problems named in `converge` (the
+    round's null tries, loop.null_converge) go on to final_refit_iters steps in all while still descending."""
+    limits = {p.name: {**cfg.search.bounds, **p.trust} for p in problems}
+    starts = {p.name: distinct_starts(fits[p.name].pop("ranked"), p.searched, limits[p.name],
+                                      max(cfg.polish_starts, cfg.final_refit_starts)) for p in problems}
+    grid = camera_starts([p for p in problems if p.name in basins], simulate, limits, nominal_steps(cfg.steps)) \
+        if cfg.camera_basins else {}
+    for name, s in grid.items():  # the camera's best other basin as one more start (loop.basins)
+        starts[name] = [*starts[name][:cfg.polish_starts], s, *starts[name][cfg.polish_starts:]]
+    if cfg.polish_iters > 0:
+        # the round's null tries (`converge`, loop.null_converge) go on to final_refit_iters steps: the tries after
+        # the null start from its end point (nested starts) and take more steps from there, so an extra effect would
+        # otherwise win by the optimiser's extra steps, not by what it models (60-run self-test, 26 Nov: 8
+        # spurious third effects, docs/loop.md)
+        iters = {p.name: max(cfg.polish_iters, cfg.final_refit_iters) if p.name in converge else cfg.polish_iters
+                 for p in problems}
+        done = polish(problems, {n: s[:cfg.polish_starts + (n in grid)] for n, s in starts.items()}, simulate,
+                      limits, iters)
+        log.info("local finish of %d tries: %d twin jobs; fitted MAE %.3f -> %.3f px (mean)", len(problems),
+                 next(iter(done.values()))["jobs_all"] if done else 0,
+                 np.nanmean([d.get("fit_start", np.nan) for d in done.values()]),
+                 np.nanmean([d.get("fit_end", np.nan) for d in done.values()]))
+    for p in problems:
+        fits[p.name]["params_final"] = dict(p.params)
+        fits[p.name]["starts"] = starts[p.name][1:cfg.final_refit_starts]  # the best: the twin continues from it
+        if cfg.polish_iters > 0:
+            fits[p.name]["polish"] = done[p.name]
