@@ -83,9 +83,9 @@ class LoopConfig:
     nested_starts: bool = True
     # the null try's finish goes on to final_refit_iters LM steps (the final refit's convergence) while still
     # descending: the tries after it start from its end point, so an unconverged null lets an extra effect pass
-    # the gate on the optimiser's extra steps alone (loop.refit.finish). Off until the 60-run self-test has
-    # measured it (docs/loop.md: its device run was lost); the paper real-photo loop is the same either way
-    null_converge: bool = False
+    # the gate on the optimiser's extra steps alone (loop.refit.finish). 60-run H200 self-test: exact set 72 -> 84 %,
+    # false accepts 36 -> 27 %, no new miss (docs/loop.md); the paper real-photo loop is the same either way
+    null_converge: bool = True
     # up to final_refit_iters LM steps; a chain stops earlier once a step gains < 0.1 % (loop.polish.MIN_GAIN).
     # 3 left the 60-run H200 self-test's contact + camera finals still descending (1.63 -> 1.08 px in 3 steps)
     final_refit_iters: int = 10
