@@ -17,6 +17,15 @@ The best grid point, A' composed with the current A, is one more start of the lo
 whose best chain wins by the fitted MAE). Only a try that adds the camera gets it (refit.finish's
 `basins`); one twin call per such finish, the search's best params' envs (n_fit per problem) and one binding
 per grid point (7 x 7 at the nominal 20 px over +-60 px: ~70 ms each on this loaded CPU).
+
+The binding is S^-1(template), so it moves with the rotation as much as with the principal point (5 deg turn
+a rim marker 26 px): a grid at the current rotation ranks its points through the wrong binding when the
+rotation is far off, and the closed form's A' cannot repair that (dev seed 1, contact + camera at the true
+physics, rotation -4.7 deg: the grid's start at -0.9 deg, its LM chain stuck at 0.90 px, the truth at 0.24).
+With `rotation` the rotation is a grid axis too (its nominal 5 deg over the bounds: 7 x 7 x 7 points), and
+`refine` more scans (one twin call each) search 3 x 3 x 3 points at half the previous step around the best
+start, through that start's own f and rotation; three halvings reach 2.5 px / 0.6 deg, the finish's
+finite-difference unit (loop.polish), where the LM takes over (the same runs: starts at 0.26-0.38 px).
 """
 
 from __future__ import annotations
