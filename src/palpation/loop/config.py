@@ -78,6 +78,15 @@ class LoopConfig:
     # every finish of a search that has the camera also starts from the camera's best other basin: a grid of
     # principal points, f and rotation in closed form (loop.basins); false = the search's best trials only
     camera_basins: bool = True
+    # the grid also spans the rotation (its nominal 5 deg step) and is refined `camera_grid_refine` times at half the
+    # step through the best start's own f and rotation (loop.basins): the binding moves with the rotation as with the
+    # principal point (5 deg = 26 px at the image circle's 300 px), and a grid at the current rotation ranked the basins
+    # through the wrong binding (dev seed 1, contact + camera at the true physics: the old grid's start ended its LM
+    # chain at 0.90 px, the truth fits 0.24 px; docs/loop.md). 3 halvings end at 2.5 px / 0.6 deg, the finish's own
+    # finite-difference unit (loop.polish: 2 % of the width), below which its Jacobian sees the binding's kinks.
+    # false / 0: the principal point only, at the current rotation
+    camera_grid_rotation: bool = True
+    camera_grid_refine: int = 3
     # a set's search also starts from the end point of every subset of it tried earlier in the round (the null
     # try's: the empty set), so a larger set fits at least as well as what it contains (loop.refit.subset_starts)
     nested_starts: bool = True
@@ -141,6 +150,8 @@ class LoopConfig:
         if self.tries_per_round < 1 or self.pair_tries < 0:
             raise ValueError(f"loop.tries_per_round={self.tries_per_round}, loop.pair_tries={self.pair_tries}: "
                              "need tries_per_round >= 1 and pair_tries >= 0")
+        if self.camera_grid_refine < 0:
+            raise ValueError(f"loop.camera_grid_refine={self.camera_grid_refine}: need >= 0 (0 = the first grid only)")
         if self.final_refit_iters < 0 or self.polish_iters < 0 or self.polish_starts < 1 \
                 or self.final_refit_starts < 1:
             raise ValueError(f"loop.final_refit_iters={self.final_refit_iters}, loop.polish_iters="

@@ -118,8 +118,8 @@ def finish(cfg: LoopConfig, problems: list, fits: dict[str, dict], simulate, bas
     limits = {p.name: {**cfg.search.bounds, **p.trust} for p in problems}
     starts = {p.name: distinct_starts(fits[p.name].pop("ranked"), p.searched, limits[p.name],
                                       max(cfg.polish_starts, cfg.final_refit_starts)) for p in problems}
-    grid = camera_starts([p for p in problems if p.name in basins], simulate, limits, nominal_steps(cfg.steps)) \
-        if cfg.camera_basins else {}
+    grid = camera_starts([p for p in problems if p.name in basins], simulate, limits, nominal_steps(cfg.steps),
+                         cfg.camera_grid_rotation, cfg.camera_grid_refine) if cfg.camera_basins else {}
     for name, s in grid.items():  # the camera's best other basin as one more start (loop.basins)
         starts[name] = [*starts[name][:cfg.polish_starts], s, *starts[name][cfg.polish_starts:]]
     if cfg.polish_iters > 0:
