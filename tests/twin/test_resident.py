@@ -102,6 +102,14 @@ def test_one_barrier_variants_equal_tiles_bit_for_bit(mesh, cpu_lanes, variant):
     np.testing.assert_array_equal(sim.contact_forces(), sim_ref.contact_forces())
 
 
+@pytest.mark.parametrize("variant", ["onesync", "packed"])
+def test_one_lane_cpu_blocks_take_any_block_dim(mesh, variant):
+    """Without cooperative CPU blocks a block has one lane whatever block_dim says (colours of <= 64)."""
+    ref, _ = _press(mesh, "resident", block_dim=64, frames=2)
+    got, _ = _press(mesh, "resident", block_dim=64, frames=2, variant=variant)
+    np.testing.assert_array_equal(got, ref)
+
+
 def test_atomic_variant(mesh, cpu_lanes):
     """One lane sums in mesh order (the streamed scatter's bits); 16 lanes differ by rounding only."""
     ref, _ = _press(mesh, "streamed")

@@ -199,14 +199,15 @@ class ResidentLayout:
             self.dm_inv = wp.array(dm_inv[order], dtype=wp.mat33, device=device)
             self.color_start = wp.array(start, dtype=wp.int32, device=device)
             self.kernel = resident_kernel(n_nodes) if variant == "tiles" else onesync_kernel(n_nodes)
-        else:  # packed constants over a flat chunk table (one chunk = at most `cap` tets of one colour)
-            cs, ce = chunk_table(start, cap or len(order))
+        else:  # packed constants over a flat chunk table (one chunk: at most one tet a lane, one colour)
+            self.lanes = block_lanes(device, cap or 1)
+            cs, ce = chunk_table(start, self.lanes)
             self.n_chunks = len(cs) - 1
+            self.chunk_start = wp.array(cs, dtype=wp.int32, device=device)
+            self.chunk_end = wp.array(ce, dtype=wp.int32, device=device)
             self.corners = wp.array(pack_corners(tets[order], needs_force), dtype=wp.uint64, device=device)
             rows = np.ascontiguousarray(dm_inv[order].reshape(len(order), 9).T, dtype=np.float32)
             self.dm_rows = wp.array(rows, dtype=float, device=device)
-            self.chunk_start = wp.array(cs, dtype=wp.int32, device=device)
-            self.chunk_end = wp.array(ce, dtype=wp.int32, device=device)
             self.kernel = packed_kernel(n_nodes, variant == "atomic")
 
     @classmethod
@@ -217,17 +218,26 @@ class ResidentLayout:
         tets = mesh.tets[needs_force[mesh.tets].any(axis=1)]
         return cls(tets, rest_shape(mesh.nodes, tets)[0], needs_force, device, colored, cap, variant, coloring)
 
-    def constants(self) -> list:
-        """The kernel's mesh-constant arguments (before inv_mass)."""
+    def constants(self, lanes: int) -> list:
+        """The kernel's mesh-constant arguments (before inv_mass) for blocks of `lanes` threads."""
         if self.variant in ("tiles", "onesync"):
             return [self.tets, self.dm_inv, self.color_start, self.n_colors, self.need]
+        if lanes != self.lanes:
+            raise ValueError(f"resident_variant {self.variant}: the layout has chunks for {self.lanes} lanes, "
+                             f"the launch {lanes}; build the twin after setting wp.config.enable_cpu_blocks")
         return [self.corners, self.dm_rows, self.chunk_start, self.chunk_end, self.n_chunks]
+
+
+def block_lanes(device, block_dim: int) -> int:
+    """Threads a block of `wp.launch_tiled` gets: one on the CPU unless cooperative CPU blocks are on."""
+    return block_dim if wp.get_device(device).is_cuda or wp.config.enable_cpu_blocks else 1
 
 
 def launch_resident(sim, block_dim: int) -> None:
     """All substeps of one frame of `sim` (a BatchedTwin) in one launch: one block per env."""
     lay, d = sim.resident, sim.cfg.damping
+    consts = lay.constants(block_lanes(sim.device, block_dim))
     wp.launch_tiled(lay.kernel, dim=[sim.n_envs], block_dim=block_dim, device=sim.device,
-                    inputs=[*lay.constants(), sim.inv_mass, sim.fixed, sim.on_surface, sim.env_mu, sim.env_lam,
+                    inputs=[*consts, sim.inv_mass, sim.fixed, sim.on_surface, sim.env_mu, sim.env_lam,
                             d.alpha, d.beta, sim.dt, sim.substeps, sim.contact, sim.v_ctl],
                     outputs=[sim.x, sim.v, sim.f_c, sim.contact_flag])
