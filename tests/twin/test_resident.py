@@ -91,7 +91,7 @@ def cpu_lanes():
     wp.config.enable_cpu_blocks = False
 
 
-@pytest.mark.parametrize("variant", ["onesync", "packed"])
+@pytest.mark.parametrize("variant", ["onesync", "packed", "compact"])
 def test_one_barrier_variants_equal_tiles_bit_for_bit(mesh, cpu_lanes, variant):
     """One barrier per colour chunk (and prefetched, packed constants) leave every add and its order."""
     ref, sim_ref = _press(mesh, "resident", block_dim=cpu_lanes)
@@ -102,7 +102,7 @@ def test_one_barrier_variants_equal_tiles_bit_for_bit(mesh, cpu_lanes, variant):
     np.testing.assert_array_equal(sim.contact_forces(), sim_ref.contact_forces())
 
 
-@pytest.mark.parametrize("variant", ["onesync", "packed"])
+@pytest.mark.parametrize("variant", ["onesync", "packed", "compact"])
 def test_one_lane_cpu_blocks_take_any_block_dim(mesh, variant):
     """Without cooperative CPU blocks a block has one lane whatever block_dim says (colours of <= 64)."""
     ref, _ = _press(mesh, "resident", block_dim=64, frames=2)

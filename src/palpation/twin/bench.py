@@ -50,7 +50,7 @@ def resident_substep_bytes(n_nodes: int, n_tets: int, n_surface: int, n_fixed: i
     masks: the same for every env, so L2 hits) and v_control of its driven nodes; once per frame it
     loads and stores x, v and writes f_c of the surface nodes. "streamed" counts every access,
     "compulsory" each array once per frame (mesh constants once per batch), both per substep.
-    `packed` (resident_variant packed/atomic): the 4 corner indices in one 8-byte word.
+    `packed` (resident_variant packed/atomic/compact): the 4 corner indices in one 8-byte word.
     """
     mesh_const = n_tets * ((8 if packed else 4 * I32) + MAT33) + n_nodes * (F32 + 3 * I32)
     per_frame = n_nodes * 4 * VEC3 + n_surface * VEC3  # x, v in and out; f_c
@@ -103,7 +103,7 @@ def time_substeps(mesh: SensorMesh, n_envs: int, n_substeps: int = 124, device: 
     if sim.resident is not None:
         nbytes = resident_substep_bytes(mesh.n_nodes, sim.n_force_tets, len(mesh.surface_nodes),
                                         int(mesh.fixed.sum()), n_envs, n_substeps,
-                                        packed=sim.resident.variant in ("packed", "atomic"))
+                                        packed=sim.resident.variant in ("packed", "atomic", "compact"))
     else:
         nbytes = substep_bytes(mesh.n_nodes, sim.n_force_tets, len(mesh.surface_nodes), n_envs, sim.gather)
     bw = device_bandwidth(sim.device)

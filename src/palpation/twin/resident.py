@@ -175,7 +175,7 @@ class ResidentLayout:
     """Device arrays of the resident kernel for one mesh: coloured moving tets, Dm^-1, node masks.
 
     `variant` (twin.integrator.resident_variant) picks the kernel: "tiles" (resident_kernel, a
-    barrier per tile write), or "onesync", "packed", "atomic" (twin/resident_sync.py)."""
+    barrier per tile write), or "onesync", "packed", "atomic", "compact" (twin/resident_sync.py)."""
 
     def __init__(self, tets: np.ndarray, dm_inv: np.ndarray, needs_force: np.ndarray, device,
                  colored: bool = True, cap: int | None = None, variant: str = "tiles",
@@ -205,10 +205,17 @@ class ResidentLayout:
             self.n_chunks = len(cs) - 1
             self.chunk_start = wp.array(cs, dtype=wp.int32, device=device)
             self.chunk_end = wp.array(ce, dtype=wp.int32, device=device)
-            self.corners = wp.array(pack_corners(tets[order], needs_force), dtype=wp.uint64, device=device)
+            # "compact": nodes renumbered force nodes first, so the force tile covers those only
+            n_force = int(needs_force.sum()) if variant == "compact" else 0
+            to_global = (np.concatenate([np.flatnonzero(needs_force), np.flatnonzero(~needs_force)])
+                         if n_force else np.arange(n_nodes))
+            to_local = np.argsort(to_global)
+            self.local_to_global = wp.array(to_global.astype(np.int32), dtype=wp.int32, device=device)
+            self.corners = wp.array(pack_corners(to_local[tets[order]], needs_force[to_global]), dtype=wp.uint64,
+                                    device=device)
             rows = np.ascontiguousarray(dm_inv[order].reshape(len(order), 9).T, dtype=np.float32)
             self.dm_rows = wp.array(rows, dtype=float, device=device)
-            self.kernel = packed_kernel(n_nodes, variant == "atomic")
+            self.kernel = packed_kernel(n_nodes, variant == "atomic", n_force)
 
     @classmethod
     def for_mesh(cls, mesh, needs_force: np.ndarray, device, colored: bool = True, cap: int | None = None,
@@ -227,6 +234,10 @@ class ResidentLayout:
                              f"the launch {lanes}; build the twin after setting wp.config.enable_cpu_blocks")
         return [self.corners, self.dm_rows, self.chunk_start, self.chunk_end, self.n_chunks]
 
+    def node_order(self) -> list:
+        """The packed kernels' last argument: their node numbering (identity unless "compact")."""
+        return [] if self.variant in ("tiles", "onesync") else [self.local_to_global]
+
 
 def block_lanes(device, block_dim: int) -> int:
     """Threads a block of `wp.launch_tiled` gets: one on the CPU unless cooperative CPU blocks are on."""
@@ -240,4 +251,4 @@ def launch_resident(sim, block_dim: int) -> None:
     wp.launch_tiled(lay.kernel, dim=[sim.n_envs], block_dim=block_dim, device=sim.device,
                     inputs=[*consts, sim.inv_mass, sim.fixed, sim.on_surface, sim.env_mu, sim.env_lam,
                             d.alpha, d.beta, sim.dt, sim.substeps, sim.contact, sim.v_ctl],
-                    outputs=[sim.x, sim.v, sim.f_c, sim.contact_flag])
+                    outputs=[sim.x, sim.v, sim.f_c, sim.contact_flag, *lay.node_order()])

@@ -110,6 +110,44 @@ def node_pass(n_nodes: int):
 
 
 @functools.lru_cache(maxsize=None)
+def node_pass_compact(n_nodes: int, n_force: int):
+    """`node_pass` over renumbered nodes: force nodes 0..n_force-1 (their f in a tile of n_force),
+    then the driven interior ones, whose velocity the control sets (no force, no contact)."""
+    store = tile_writers(n_nodes)[2]
+    store_f = tile_writers(n_force)[2]
+
+    @wp.func
+    def nodes(lane: int, nb: int, env: int, off: int, s: int, substeps: int, dt: float, xs: wp.tile[wp.vec3, n_nodes],
+              vs: wp.tile[wp.vec3, n_nodes], fs: wp.tile[wp.vec3, n_force], inv_mass: wp.array[float],
+              fixed: wp.array[wp.int32], on_surface: wp.array[wp.int32], p: ContactParams,
+              v_ctl: wp.array[wp.vec3], f_c: wp.array[wp.vec3], contact_flag: wp.array[wp.int32],
+              local_to_global: wp.array[wp.int32]):
+        for base in range(0, n_nodes, nb):
+            i = base + lane
+            if i < n_nodes:
+                node = local_to_global[i]
+                w = dt * inv_mass[node]
+                vel = vs[i]
+                if i < n_force:
+                    vel = vel + w * fs[i]
+                    store_f(fs, i, wp.vec3(0.0), True)
+                xi = xs[i]
+                if on_surface[node] != 0:
+                    fc, touched = surface_contact_force(xi, vel, env, node, p, 1)
+                    if s == substeps - 1:
+                        f_c[off + node] = fc
+                    if touched != 0:
+                        contact_flag[env] = 1
+                    vel = vel + w * fc
+                if fixed[node] != 0:
+                    vel = v_ctl[off + node]
+                store(vs, i, vel, True)
+                store(xs, i, xi + dt * vel, True)
+
+    return nodes
+
+
+@functools.lru_cache(maxsize=None)
 def onesync_kernel(n_nodes: int):
     """The "tiles" kernel's arithmetic and order with one barrier per colour chunk."""
     add_plain = tile_writers(n_nodes)[0]
@@ -157,10 +195,16 @@ def onesync_kernel(n_nodes: int):
 
 
 @functools.lru_cache(maxsize=None)
-def packed_kernel(n_nodes: int, atomic: bool):
-    """Packed constants, next chunk prefetched; colour chunks + plain adds, or mesh order + atomics."""
-    add_plain, add_atomic = tile_writers(n_nodes)[:2]
-    nodes = node_pass(n_nodes)
+def packed_kernel(n_nodes: int, atomic: bool, n_force: int = 0):
+    """Packed constants, next chunk prefetched; colour chunks + plain adds, or mesh order + atomics.
+
+    n_force > 0 ("compact"): the nodes are renumbered force nodes first (`local_to_global`), so the
+    force tile holds the n_force nodes that need a force only."""
+    compact = n_force > 0
+    n_f = n_force if compact else n_nodes
+    add_plain, add_atomic = tile_writers(n_f)[:2]
+    store = tile_writers(n_nodes)[2]
+    nodes = node_pass_compact(n_nodes, n_force) if compact else node_pass(n_nodes)
     lo = wp.uint64(0x7FFF)
 
     @wp.func
@@ -178,14 +222,25 @@ def packed_kernel(n_nodes: int, atomic: bool):
                      fixed: wp.array[wp.int32], on_surface: wp.array[wp.int32], env_mu: wp.array[float],
                      env_lam: wp.array[float], alpha: float, beta: float, dt: float, substeps: int,
                      p: ContactParams, v_ctl: wp.array[wp.vec3], x: wp.array[wp.vec3], v: wp.array[wp.vec3],
-                     f_c: wp.array[wp.vec3], contact_flag: wp.array[wp.int32]):
+                     f_c: wp.array[wp.vec3], contact_flag: wp.array[wp.int32],
+                     local_to_global: wp.array[wp.int32]):
         env, lane = wp.tid()
         nb = wp.block_dim()
         off = env * n_nodes
         last = corners.shape[0] - 1
-        xs = wp.tile_load(x, shape=n_nodes, offset=off, storage="shared")
-        vs = wp.tile_load(v, shape=n_nodes, offset=off, storage="shared")
-        fs = wp.tile_zeros(shape=n_nodes, dtype=wp.vec3, storage="shared")
+        if wp.static(compact):  # x, v in the kernel's node numbering
+            xs = wp.tile_empty(shape=n_nodes, dtype=wp.vec3, storage="shared")
+            vs = wp.tile_empty(shape=n_nodes, dtype=wp.vec3, storage="shared")
+            for base in range(0, n_nodes, nb):
+                i = base + lane
+                if i < n_nodes:
+                    store(xs, i, x[off + local_to_global[i]], True)
+                    store(vs, i, v[off + local_to_global[i]], True)
+        else:
+            xs = wp.tile_load(x, shape=n_nodes, offset=off, storage="shared")
+            vs = wp.tile_load(v, shape=n_nodes, offset=off, storage="shared")
+        fs = wp.tile_zeros(shape=n_f, dtype=wp.vec3, storage="shared")
+        block_sync()
         mu = env_mu[env]
         lam = env_lam[env]
         for s in range(substeps):
@@ -226,10 +281,21 @@ def packed_kernel(n_nodes: int, atomic: bool):
                 ok = ok_n
             if wp.static(atomic):
                 block_sync()
-            nodes(lane, nb, env, off, s, substeps, dt, xs, vs, fs, inv_mass, fixed, on_surface, p, v_ctl, f_c,
-                  contact_flag)
+            if wp.static(compact):
+                nodes(lane, nb, env, off, s, substeps, dt, xs, vs, fs, inv_mass, fixed, on_surface, p, v_ctl, f_c,
+                      contact_flag, local_to_global)
+            else:
+                nodes(lane, nb, env, off, s, substeps, dt, xs, vs, fs, inv_mass, fixed, on_surface, p, v_ctl, f_c,
+                      contact_flag)
             block_sync()
-        wp.tile_store(x, xs, offset=off)
-        wp.tile_store(v, vs, offset=off)
+        if wp.static(compact):
+            for base in range(0, n_nodes, nb):
+                i = base + lane
+                if i < n_nodes:
+                    x[off + local_to_global[i]] = xs[i]
+                    v[off + local_to_global[i]] = vs[i]
+        else:
+            wp.tile_store(x, xs, offset=off)
+            wp.tile_store(v, vs, offset=off)
 
     return frame_packed
