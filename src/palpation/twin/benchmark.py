@@ -154,7 +154,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
                     cfg.integrator.resident_coloring = coloring or cfg.integrator.resident_coloring
                     cfg.validate()  # a mistyped --variants fails here with the key to fix
                     records.append(bench_point(mesh, cfg, n, args.device, args.max_frames, args.budget_s))
-                save_json(args.out, records)  # rewritten after each point: a long run keeps what it has
+                    save_json(args.out, records)  # rewritten after each point: a long run keeps what it has
     print(json.dumps(records, indent=1))
     return records
 
