@@ -111,10 +111,12 @@ def test_one_lane_cpu_blocks_take_any_block_dim(mesh, variant):
 
 
 def test_atomic_variant(mesh, cpu_lanes):
-    """One lane sums in mesh order (the streamed scatter's bits); 16 lanes differ by rounding only."""
-    ref, _ = _press(mesh, "streamed")
-    one, _ = _press(mesh, "resident", variant="atomic")
+    """One lane sums in colour order (the bits of tiles); 16 lanes differ by rounding only."""
+    wp.config.enable_cpu_blocks = False
+    ref, _ = _press(mesh, "resident", block_dim=64)
+    one, _ = _press(mesh, "resident", block_dim=64, variant="atomic")
     np.testing.assert_array_equal(one, ref)
+    wp.config.enable_cpu_blocks = True
     got, sim = _press(mesh, "resident", block_dim=cpu_lanes, variant="atomic")
     moved = np.abs(ref[-1] - ref[0]).max()
     assert 0 < np.abs(got - ref).max() < 1e-4 * moved and sim.contact_flags()[0]

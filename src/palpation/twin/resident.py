@@ -184,11 +184,11 @@ class ResidentLayout:
             raise ValueError(f"twin.integrator.resident_variant={variant!r}: use one of {VARIANTS}")
         # colored=False: one "colour" in mesh order, the streamed path's sum order; valid with one
         # lane per block only (the CPU default), where it reproduces the streamed kernels bit for bit.
-        # The atomic variant needs no colours: it always runs the tets in mesh order.
-        colored = colored and variant != "atomic"
         order, start = (color_tets(tets, needs_force, cap, coloring) if colored
                         else (np.arange(len(tets)), [0, len(tets)]))
         start = np.asarray(start, np.int32)
+        if variant == "atomic":  # colour order (a warp's tets rarely share a node, so its atomics rarely
+            start = start[[0, -1]]  # collide), full chunks across colours: no barrier between them
         self.variant = variant
         self.n_colors = len(start) - 1
         self.n_tets = len(order)
