@@ -4,7 +4,8 @@
 # 1. the benchmark, 500 reference envs, a full 398-frame slide batch per variant and block size (aim:
 #    <= 15 s), one process each, the first version ("tiles", 18.9 s on an H200) rerun as the baseline;
 # 2. markers of the fastest variant vs the streamed kernels on cuda:0, the five agreement trajectories at
-#    full length (aim: <= 0.01 px), then of the other variants while the time lasts.
+#    full length (aim: <= 0.01 px), then of the other variants while the time lasts;
+# 3. with BASELINE=1, the streamed path's same point (38.1 s on an H200).
 #   bash workflow/scripts/gpu_resident_variants.sh OUTDIR
 # Prints one line per variant: full-batch seconds and core microseconds a substep. A CPU smoke run:
 #   DEVICE=cpu RESOLUTION=coarse N_ENVS=1 AGREE_ARGS="--max-frames 5" bash ... /tmp/out
@@ -53,4 +54,9 @@ for pt in $(cut -d' ' -f1 "$out/ranking.txt"); do
     --kernels streamed resident --variant "$v" --block-dim "${pt#*@}" --out "$out/agreement_${pt//[:@]/_}.json" \
     ${AGREE_ARGS:-} 2>&1 | tail -1
 done
+if [ "${BASELINE:-0}" = 1 ]; then  # the streamed path's same point on the same card (~45 s more)
+  # shellcheck disable=SC2086
+  $py -m palpation.twin.benchmark --device "$dev" --mesh-dir "$mesh_dir" --resolutions "$res" \
+    --n-envs ${N_ENVS:-500} --out "$out/twin_streamed.json" 2>&1 | grep -o '"wall_s_measured": [0-9.]*'
+fi
 echo "done after ${SECONDS} s"
