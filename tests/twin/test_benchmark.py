@@ -33,7 +33,10 @@ def test_resident_kernel_entry(mesh, tmp_path, monkeypatch):
     monkeypatch.setattr(benchmark.SensorMesh, "load", classmethod(lambda cls, path: mesh))
     out = tmp_path / "twin.json"
     benchmark.main(["--device", "cpu", "--resolutions", "coarse", "--n-envs", "2", "--max-frames", "3",
-                    "--kernel", "resident", "--block-dim", "256", "--out", str(out)])
-    (rec,) = json.loads(out.read_text())
+                    "--kernel", "resident", "--block-dim", "256", "--variants", "tiles", "packed:largest_first",
+                    "--out", str(out)])
+    rec, packed = json.loads(out.read_text())
     assert rec["kernel"] == "resident" and rec["block_dim"] == 256 and rec["force_sum"] == "colored"
+    assert (rec["resident_variant"], rec["resident_coloring"]) == ("tiles", "mesh_order")
+    assert (packed["resident_variant"], packed["resident_coloring"]) == ("packed", "largest_first")
     assert CORE <= rec.keys() and rec["core_substep_us"] > 0

@@ -6,16 +6,18 @@ import warp as wp
 
 from palpation.twin.config import TwinConfig
 from palpation.twin.resident import ResidentLayout, color_tets
+from palpation.twin.resident_sync import chunk_table, pack_corners
 from palpation.twin.simulator import BatchedTwin
 
 
 DEVICES = ["cpu"] + (["cuda:0"] if wp.is_cuda_available() else [])
 
 
-def _press(mesh, kernel, frames=6, layout=None, block_dim=1, device="cpu"):
+def _press(mesh, kernel, frames=6, layout=None, block_dim=1, device="cpu", variant="tiles", coloring="mesh_order"):
     """Two envs pressing 2 mm into the vessel (one without it): positions after each frame."""
     cfg = TwinConfig()
     cfg.integrator.kernel, cfg.integrator.block_dim = kernel, block_dim
+    cfg.integrator.resident_variant, cfg.integrator.resident_coloring = variant, coloring
     cfg.integrator.force_sum = "scatter" if device == "cpu" else "gather"  # mesh-order sums
     sim = BatchedTwin(mesh, 2, cfg, {"vessel": np.array([1.0, 0.0])}, device=device)
     if layout is not None:
@@ -34,10 +36,10 @@ def _press(mesh, kernel, frames=6, layout=None, block_dim=1, device="cpu"):
     return np.array(out), sim
 
 
-@pytest.mark.parametrize("cap", [None, 64])
-def test_coloring_separates_force_nodes(mesh, cap):
+@pytest.mark.parametrize("cap,coloring", [(None, "mesh_order"), (64, "mesh_order"), (64, "largest_first")])
+def test_coloring_separates_force_nodes(mesh, cap, coloring):
     need = ~mesh.fixed | np.isin(np.arange(mesh.n_nodes), mesh.surface_nodes)
-    order, start = color_tets(mesh.tets, need, cap)
+    order, start = color_tets(mesh.tets, need, cap, coloring)
     assert sorted(order) == list(range(mesh.n_tets)) and start[-1] == mesh.n_tets
     assert cap is None or np.diff(start).max() <= cap
     for c in range(len(start) - 1):
@@ -78,4 +80,73 @@ def test_resident_rejects_layered_config():
     cfg = TwinConfig()
     cfg.integrator.kernel, cfg.damping.per_env = "resident", True
     with pytest.raises(ValueError, match="resident"):
+        cfg.validate()
+
+
+@pytest.fixture
+def cpu_lanes():
+    """Cooperative CPU lanes (fibers): a missing barrier changes the order of the sums, so the bits."""
+    wp.config.enable_cpu_blocks = True
+    yield 16
+    wp.config.enable_cpu_blocks = False
+
+
+@pytest.mark.parametrize("variant", ["onesync", "packed", "compact"])
+def test_one_barrier_variants_equal_tiles_bit_for_bit(mesh, cpu_lanes, variant):
+    """One barrier per colour chunk (and prefetched, packed constants) leave every add and its order."""
+    ref, sim_ref = _press(mesh, "resident", block_dim=cpu_lanes)
+    got, sim = _press(mesh, "resident", block_dim=cpu_lanes, variant=variant)
+    assert sim.contact_flags()[0] and not sim.contact_flags()[1]
+    np.testing.assert_array_equal(got, ref)
+    np.testing.assert_array_equal(sim.velocities_world(), sim_ref.velocities_world())
+    np.testing.assert_array_equal(sim.contact_forces(), sim_ref.contact_forces())
+
+
+@pytest.mark.parametrize("variant", ["onesync", "packed", "compact"])
+def test_one_lane_cpu_blocks_take_any_block_dim(mesh, variant):
+    """Without cooperative CPU blocks a block has one lane whatever block_dim says (colours of <= 64)."""
+    ref, _ = _press(mesh, "resident", block_dim=64, frames=2)
+    got, _ = _press(mesh, "resident", block_dim=64, frames=2, variant=variant)
+    np.testing.assert_array_equal(got, ref)
+
+
+def test_atomic_variant(mesh, cpu_lanes):
+    """One lane sums in colour order (the bits of tiles); 16 lanes differ by rounding only."""
+    wp.config.enable_cpu_blocks = False
+    ref, _ = _press(mesh, "resident", block_dim=64)
+    one, _ = _press(mesh, "resident", block_dim=64, variant="atomic")
+    np.testing.assert_array_equal(one, ref)
+    wp.config.enable_cpu_blocks = True
+    got, sim = _press(mesh, "resident", block_dim=cpu_lanes, variant="atomic")
+    moved = np.abs(ref[-1] - ref[0]).max()
+    assert 0 < np.abs(got - ref).max() < 1e-4 * moved and sim.contact_flags()[0]
+
+
+def test_largest_first_coloring_agrees(mesh, cpu_lanes):
+    ref, _ = _press(mesh, "streamed")
+    got, _ = _press(mesh, "resident", block_dim=cpu_lanes, variant="packed", coloring="largest_first")
+    assert np.abs(got - ref).max() < 1e-4 * np.abs(ref[-1] - ref[0]).max()
+
+
+def test_packed_layout_round_trips():
+    tets = np.array([[0, 1, 2, 3], [32767, 5, 40, 7]])
+    need = np.zeros(32768, bool)
+    need[[1, 40, 32767]] = True
+    q = pack_corners(tets, need)
+    fields = (q[:, None] >> (16 * np.arange(4, dtype=np.uint64))) & np.uint64(0xFFFF)
+    np.testing.assert_array_equal(fields & np.uint64(0x7FFF), tets)
+    np.testing.assert_array_equal(fields >> np.uint64(15) != 0, need[tets])
+    with pytest.raises(ValueError, match="onesync"):
+        pack_corners(np.array([[0, 1, 2, 32768]]), np.ones(32769, bool))
+    starts, ends = chunk_table(np.array([0, 5, 6, 20]), cap=4)
+    assert list(zip(starts, ends)) == [(0, 4), (4, 5), (5, 6), (6, 10), (10, 14), (14, 18), (18, 20), (0, 0)]
+
+
+def test_resident_variant_names_are_checked():
+    cfg = TwinConfig()
+    cfg.integrator.resident_variant = "fast"
+    with pytest.raises(ValueError, match="resident_variant"):
+        cfg.validate()
+    cfg.integrator.resident_variant, cfg.integrator.resident_coloring = "packed", "dsatur"
+    with pytest.raises(ValueError, match="resident_coloring"):
         cfg.validate()

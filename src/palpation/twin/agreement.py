@@ -34,8 +34,10 @@ def agreement_requests() -> list[EnvRequest]:
 
 
 def compare_devices(mesh: SensorMesh, devices: list[str], max_frames: int | None = None,
-                    kernels: tuple[str, str] = ("streamed", "streamed")) -> dict:
-    """The agreement batch on devices[0] with kernels[0] vs devices[-1] with kernels[-1]."""
+                    kernels: tuple[str, str] = ("streamed", "streamed"), variant: str | None = None,
+                    block_dim: int | None = None) -> dict:
+    """The agreement batch on devices[0] with kernels[0] vs devices[-1] with kernels[-1];
+    `variant` ("VARIANT" or "VARIANT:COLORING") and `block_dim` set the resident runs' integrator keys."""
     from palpation.markers.template import rest_template
 
     binding = bind_markers(mesh.nodes, mesh.dome_nodes, rest_template())
@@ -43,6 +45,11 @@ def compare_devices(mesh: SensorMesh, devices: list[str], max_frames: int | None
     for dev, kernel in ((devices[0], kernels[0]), (devices[-1], kernels[-1])):
         cfg = TwinConfig()
         cfg.integrator.kernel = kernel
+        if variant:
+            name, _, coloring = variant.partition(":")
+            cfg.integrator.resident_variant = name
+            cfg.integrator.resident_coloring = coloring or cfg.integrator.resident_coloring
+        cfg.integrator.block_dim = block_dim or cfg.integrator.block_dim
         res = run_batch(mesh, cfg, agreement_requests(), binding=binding, device=dev, progress=False,
                         max_frames=max_frames)
         if res.failed:
@@ -54,7 +61,9 @@ def compare_devices(mesh: SensorMesh, devices: list[str], max_frames: int | None
         contact_same = float(np.mean(rec.contact == runs[1][name].contact))
         per[name] = {"max_px": float(diff.max()), "mean_px": float(diff.mean()),
                      "final_mean_px": float(diff[-1].mean()), "contact_agreement": contact_same}
-    return {"devices": devices, "kernels": list(kernels), "resolution": mesh.resolution, "commit": git_commit(),
+    ig = cfg.integrator  # the last run's: the resident one if any
+    return {"devices": devices, "kernels": list(kernels), "resident_variant": f"{ig.resident_variant}:"
+            f"{ig.resident_coloring}", "block_dim": ig.block_dim, "resolution": mesh.resolution, "commit": git_commit(),
             "frames": {name: len(rec.markers) for name, rec in runs[0].items()},
             "max_px": max(v["max_px"] for v in per.values()), "per_trajectory": per}
 
@@ -68,14 +77,19 @@ def main(argv: list[str] | None = None) -> int:
                         help="first is the reference (default: cpu cuda:0)")
     parser.add_argument("--kernels", nargs="+", default=["streamed"], choices=["streamed", "resident"],
                         help="twin.integrator.kernel of the first and the last run (default: streamed both)")
+    parser.add_argument("--variant", default=None,
+                        help="resident runs: twin.integrator.resident_variant[:resident_coloring], e.g. packed")
+    parser.add_argument("--block-dim", type=int, default=None, help="resident runs: twin.integrator.block_dim")
     parser.add_argument("--max-frames", type=int, default=None, help="cut trajectories short")
     parser.add_argument("--out", required=True, help="JSON output")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO)
     kernels = (args.kernels[0], args.kernels[-1])
-    result = compare_devices(SensorMesh.load(args.mesh), args.devices, args.max_frames, kernels)
+    result = compare_devices(SensorMesh.load(args.mesh), args.devices, args.max_frames, kernels, args.variant,
+                             args.block_dim)
     save_json(args.out, result)
-    print(f"max marker difference {args.devices[0]} {kernels[0]} vs {args.devices[-1]} {kernels[1]}: "
+    print(f"max marker difference {args.devices[0]} {kernels[0]} vs {args.devices[-1]} {kernels[1]} "
+          f"({result['resident_variant'] + '@' + str(result['block_dim']) if 'resident' in kernels else 'streamed'}): "
           f"{result['max_px']:.4g} px")
     return 0
 

@@ -43,15 +43,16 @@ def substep_bytes(n_nodes: int, n_tets: int, n_surface: int, n_envs: int,
 
 
 def resident_substep_bytes(n_nodes: int, n_tets: int, n_surface: int, n_fixed: int, n_envs: int,
-                           substeps: int) -> dict[str, int]:
+                           substeps: int, packed: bool = False) -> dict[str, int]:
     """Global-memory bytes per substep of the frame-resident kernel (twin/resident.py).
 
     Per env and substep a block reads the mesh constants (tet indices, Dm^-1, 1/m and the node
     masks: the same for every env, so L2 hits) and v_control of its driven nodes; once per frame it
     loads and stores x, v and writes f_c of the surface nodes. "streamed" counts every access,
     "compulsory" each array once per frame (mesh constants once per batch), both per substep.
+    `packed` (resident_variant packed/atomic/compact): the 4 corner indices in one 8-byte word.
     """
-    mesh_const = n_tets * (4 * I32 + MAT33) + n_nodes * (F32 + 3 * I32)
+    mesh_const = n_tets * ((8 if packed else 4 * I32) + MAT33) + n_nodes * (F32 + 3 * I32)
     per_frame = n_nodes * 4 * VEC3 + n_surface * VEC3  # x, v in and out; f_c
     streamed = n_envs * (mesh_const + n_fixed * VEC3 + per_frame / substeps)
     compulsory = mesh_const / substeps + n_envs * (per_frame + n_nodes * VEC3) / substeps  # + v_control
@@ -101,7 +102,8 @@ def time_substeps(mesh: SensorMesh, n_envs: int, n_substeps: int = 124, device: 
     per_substep = best / n_substeps
     if sim.resident is not None:
         nbytes = resident_substep_bytes(mesh.n_nodes, sim.n_force_tets, len(mesh.surface_nodes),
-                                        int(mesh.fixed.sum()), n_envs, n_substeps)
+                                        int(mesh.fixed.sum()), n_envs, n_substeps,
+                                        packed=sim.resident.variant in ("packed", "atomic", "compact"))
     else:
         nbytes = substep_bytes(mesh.n_nodes, sim.n_force_tets, len(mesh.surface_nodes), n_envs, sim.gather)
     bw = device_bandwidth(sim.device)

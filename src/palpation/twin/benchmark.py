@@ -12,6 +12,8 @@ and then the record says so in its field names: `wall_s_extrapolated`, `extrapol
     python -m palpation.twin.benchmark --device cpu --budget-s 20 --out results/bench/twin.json
     python -m palpation.twin.benchmark --device cuda:0 --kernel resident --resolutions reference \
         --n-envs 500 --out results/bench/twin_resident.json     # the frame-resident kernel (issue 17)
+    python -m palpation.twin.benchmark --device cuda:0 --kernel resident --resolutions reference \
+        --n-envs 500 --variants tiles onesync packed packed:largest_first atomic   # its variants
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ import warp as wp
 from palpation.io import save_json
 from palpation.tracking import git_commit
 from palpation.twin.bench import time_substeps
-from palpation.twin.config import TwinConfig
+from palpation.twin.config import RESIDENT_COLORINGS, RESIDENT_VARIANTS, TwinConfig
 from palpation.twin.markers import bind_markers
 from palpation.twin.mesh import SensorMesh
 from palpation.twin.runner import EnvRequest, run_batch
@@ -79,7 +81,9 @@ def bench_point(mesh: SensorMesh, cfg: TwinConfig, n_envs: int, device: str, max
            "setup_s": setup, "nodes": mesh.n_nodes, "tets": mesh.n_tets, "commit": git_commit(),
            "kernel": cfg.integrator.kernel}
     if cfg.integrator.kernel == "resident":
-        rec["block_dim"] = cfg.integrator.block_dim
+        ig = cfg.integrator
+        rec.update(block_dim=ig.block_dim, resident_variant=ig.resident_variant,
+                   resident_coloring=ig.resident_coloring)
     if k == SLIDE_FRAMES:  # the whole batch was timed: no estimate in the record
         rec.update(wall_s_measured=tk, trajectories_per_hour=n_envs * 3600.0 / tk)
     else:
@@ -100,6 +104,11 @@ def bench_point(mesh: SensorMesh, cfg: TwinConfig, n_envs: int, device: str, max
                 "roofline_fraction_compulsory": core["roofline_fraction_compulsory"]})
     log.info("%s", rec)
     return rec
+
+
+def default_variant() -> str:
+    ig = TwinConfig().integrator
+    return f"{ig.resident_variant}:{ig.resident_coloring}"
 
 
 def device_name(device: str) -> str:
@@ -123,6 +132,10 @@ def main(argv: list[str] | None = None) -> list[dict]:
                         help="twin.integrator.kernel: the streamed substep kernels or the frame-resident one")
     parser.add_argument("--block-dim", type=int, nargs="+", default=[TwinConfig().integrator.block_dim],
                         help="threads per env block of the resident kernel (one record each)")
+    parser.add_argument("--variants", nargs="+", default=[default_variant()],
+                        help="resident kernel variants, VARIANT or VARIANT:COLORING (twin.integrator."
+                             f"resident_variant: {', '.join(RESIDENT_VARIANTS)}; resident_coloring: "
+                             f"{', '.join(RESIDENT_COLORINGS)}); one record each")
     parser.add_argument("--out", type=Path, default=Path("results/bench/twin.json"))
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s %(name)s %(message)s")
@@ -130,12 +143,18 @@ def main(argv: list[str] | None = None) -> list[dict]:
     for res in args.resolutions:
         mesh = SensorMesh.load(args.mesh_dir / f"mesh_{res}.npz")
         for n in args.n_envs:
-            for block_dim in (args.block_dim if args.kernel == "resident" else [None]):
-                cfg = TwinConfig(device=args.device)
-                cfg.integrator.kernel = args.kernel
-                cfg.integrator.block_dim = block_dim or cfg.integrator.block_dim
-                records.append(bench_point(mesh, cfg, n, args.device, args.max_frames, args.budget_s))
-                save_json(args.out, records)  # rewritten after each point: a long run keeps what it has
+            resident = args.kernel == "resident"
+            for variant in (args.variants if resident else [default_variant()]):
+                for block_dim in (args.block_dim if resident else [None]):
+                    cfg = TwinConfig(device=args.device)
+                    cfg.integrator.kernel = args.kernel
+                    cfg.integrator.block_dim = block_dim or cfg.integrator.block_dim
+                    name, _, coloring = variant.partition(":")
+                    cfg.integrator.resident_variant = name
+                    cfg.integrator.resident_coloring = coloring or cfg.integrator.resident_coloring
+                    cfg.validate()  # a mistyped --variants fails here with the key to fix
+                    records.append(bench_point(mesh, cfg, n, args.device, args.max_frames, args.budget_s))
+                    save_json(args.out, records)  # rewritten after each point: a long run keeps what it has
     print(json.dumps(records, indent=1))
     return records
 

@@ -18,6 +18,8 @@ from hydra.core.config_store import ConfigStore
 
 from palpation import paper
 
+RESIDENT_VARIANTS = ("tiles", "onesync", "packed", "atomic", "compact")  # twin/resident_sync.py
+RESIDENT_COLORINGS = ("mesh_order", "largest_first")  # resident.color_tets
 REF_LENGTH_SCALE = paper.LENGTH_SCALE  # reference sim length / physical length (SPEC §1.2)
 
 
@@ -73,6 +75,12 @@ class IntegratorConfig:
     # memory (twin/resident.py, issue 17; SDF contact and the plain elastic kernel only)
     kernel: str = "streamed"
     block_dim: int = 512  # threads per env block of the resident kernel (<= 512: 106 registers a thread)
+    # the resident kernel's variant (twin/resident_sync.py): "tiles" (a barrier per tile write, the
+    # first version), "onesync" / "packed" (one barrier per colour chunk; packed, prefetched mesh
+    # constants: the same bits as "tiles"), "atomic" (shared atomics, full chunks; GPU sums unordered),
+    # "compact" ("packed" with a force tile over the force nodes only: 111 KB, two 256-thread blocks an SM)
+    resident_variant: str = "tiles"
+    resident_coloring: str = "mesh_order"  # or "largest_first": 41 colour chunks at reference, not 44
 
 
 @dataclass
@@ -220,6 +228,12 @@ class TwinConfig:
                              "kernel (material.shell_thickness=0, damping.per_env=false); use 'streamed'")
         if not 1 <= self.integrator.block_dim <= 512:  # 106 registers a thread on sm_90: 512 fit an SM
             raise ValueError(f"twin.integrator.block_dim={self.integrator.block_dim}: use 1..512 threads")
+        if self.integrator.resident_variant not in RESIDENT_VARIANTS:
+            raise ValueError(f"twin.integrator.resident_variant={self.integrator.resident_variant!r}: "
+                             f"use one of {RESIDENT_VARIANTS}")
+        if self.integrator.resident_coloring not in RESIDENT_COLORINGS:
+            raise ValueError(f"twin.integrator.resident_coloring={self.integrator.resident_coloring!r}: "
+                             f"use one of {RESIDENT_COLORINGS}")
         if self.material.shell_thickness < 0 or self.material.shell_ratio <= 0:
             raise ValueError(f"twin.material: need shell_thickness >= 0 and shell_ratio > 0, got "
                              f"{self.material.shell_thickness}, {self.material.shell_ratio}")

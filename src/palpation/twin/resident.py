@@ -19,27 +19,39 @@ import functools
 import numpy as np
 import warp as wp
 
+from palpation.twin.config import RESIDENT_COLORINGS as COLORINGS
+from palpation.twin.config import RESIDENT_VARIANTS as VARIANTS
 from palpation.twin.contact import ContactParams, surface_contact_force
 from palpation.twin.elasticity import rest_shape, tet_forces
+from palpation.twin.resident_sync import chunk_table, onesync_kernel, pack_corners, packed_kernel
 
 VEC3 = 12
 
 
-def color_tets(tets: np.ndarray, needs_force: np.ndarray, cap: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Greedy colouring in mesh order: no two tets of a colour share a node that needs its force.
+def color_tets(tets: np.ndarray, needs_force: np.ndarray, cap: int | None = None,
+               coloring: str = "mesh_order") -> tuple[np.ndarray, np.ndarray]:
+    """Greedy colouring: no two tets of a colour share a node that needs its force.
 
     A colour holds at most `cap` tets (one block's lanes): the first colours fill whole chunks
     instead of the plain greedy's 560, 547, ... 16, so fewer chunks (barriers) run per substep.
-    Returns (order, start): tets[order] lists colour 0 first, each colour in mesh order, and colour
+    coloring="mesh_order" colours the tets in mesh order; "largest_first" first those whose busiest
+    force node has the most tets (reference mesh, cap 512: 41 colours instead of 44; 40 is the floor).
+    Returns (order, start): tets[order] lists colour 0 first, each colour in visiting order, and colour
     k is order[start[k]:start[k+1]]. Driven interior nodes are ignored: their force is discarded.
     """
     tets = np.asarray(tets)
     cap = cap or len(tets)
+    if coloring not in COLORINGS:
+        raise ValueError(f"twin.integrator.resident_coloring={coloring!r}: use one of {COLORINGS}")
+    visit = np.arange(len(tets))
+    if coloring == "largest_first":
+        degree = np.bincount(tets[needs_force[tets]], minlength=len(needs_force))
+        visit = np.argsort(-np.where(needs_force[tets], degree[tets], 0).max(axis=1), kind="stable")
     used: list[set[int]] = [set() for _ in range(len(needs_force))]  # colours seen at each node
     color = np.empty(len(tets), np.int64)
     size: list[int] = []
-    for t, corners in enumerate(tets):
-        nodes = [int(i) for i in corners if needs_force[i]]
+    for t in visit:
+        nodes = [int(i) for i in tets[t] if needs_force[i]]
         taken = set().union(*(used[i] for i in nodes)) if nodes else set()
         c = 0
         while c in taken or (c < len(size) and size[c] >= cap):
@@ -50,7 +62,7 @@ def color_tets(tets: np.ndarray, needs_force: np.ndarray, cap: int | None = None
         color[t] = c
         for i in nodes:
             used[i].add(c)
-    order = np.argsort(color, kind="stable")
+    order = visit[np.argsort(color[visit], kind="stable")]
     start = np.concatenate([[0], np.cumsum(np.bincount(color))]).astype(np.int32)
     return order, start
 
@@ -160,36 +172,83 @@ def resident_kernel(n_nodes: int):
 
 
 class ResidentLayout:
-    """Device arrays of the resident kernel for one mesh: coloured moving tets, Dm^-1, node masks."""
+    """Device arrays of the resident kernel for one mesh: coloured moving tets, Dm^-1, node masks.
+
+    `variant` (twin.integrator.resident_variant) picks the kernel: "tiles" (resident_kernel, a
+    barrier per tile write), or "onesync", "packed", "atomic", "compact" (twin/resident_sync.py)."""
 
     def __init__(self, tets: np.ndarray, dm_inv: np.ndarray, needs_force: np.ndarray, device,
-                 colored: bool = True, cap: int | None = None):
+                 colored: bool = True, cap: int | None = None, variant: str = "tiles",
+                 coloring: str = "mesh_order"):
+        if variant not in VARIANTS:
+            raise ValueError(f"twin.integrator.resident_variant={variant!r}: use one of {VARIANTS}")
         # colored=False: one "colour" in mesh order, the streamed path's sum order; valid with one
-        # lane per block only (the CPU default), where it reproduces the streamed kernels bit for bit
-        order, start = color_tets(tets, needs_force, cap) if colored else (np.arange(len(tets)), [0, len(tets)])
+        # lane per block only (the CPU default), where it reproduces the streamed kernels bit for bit.
+        order, start = (color_tets(tets, needs_force, cap, coloring) if colored
+                        else (np.arange(len(tets)), [0, len(tets)]))
         start = np.asarray(start, np.int32)
+        if variant == "atomic":  # colour order (a warp's tets rarely share a node, so its atomics rarely
+            start = start[[0, -1]]  # collide), full chunks across colours: no barrier between them
+        self.variant = variant
         self.n_colors = len(start) - 1
         self.n_tets = len(order)
-        self.tets = wp.array(tets[order].astype(np.int32), dtype=wp.int32, device=device)
-        self.dm_inv = wp.array(dm_inv[order], dtype=wp.mat33, device=device)
-        self.color_start = wp.array(start, dtype=wp.int32, device=device)
         self.need = wp.array(needs_force.astype(np.int32), dtype=wp.int32, device=device)
-        self.kernel = resident_kernel(len(needs_force))
+        n_nodes = len(needs_force)
+        if variant in ("tiles", "onesync"):
+            self.tets = wp.array(tets[order].astype(np.int32), dtype=wp.int32, device=device)
+            self.dm_inv = wp.array(dm_inv[order], dtype=wp.mat33, device=device)
+            self.color_start = wp.array(start, dtype=wp.int32, device=device)
+            self.kernel = resident_kernel(n_nodes) if variant == "tiles" else onesync_kernel(n_nodes)
+        else:  # packed constants over a flat chunk table (one chunk: at most one tet a lane, one colour)
+            self.lanes = block_lanes(device, cap or 1)
+            cs, ce = chunk_table(start, self.lanes)
+            self.n_chunks = len(cs) - 1
+            self.chunk_start = wp.array(cs, dtype=wp.int32, device=device)
+            self.chunk_end = wp.array(ce, dtype=wp.int32, device=device)
+            # "compact": nodes renumbered force nodes first, so the force tile covers those only
+            n_force = int(needs_force.sum()) if variant == "compact" else 0
+            to_global = (np.concatenate([np.flatnonzero(needs_force), np.flatnonzero(~needs_force)])
+                         if n_force else np.arange(n_nodes))
+            to_local = np.argsort(to_global)
+            self.local_to_global = wp.array(to_global.astype(np.int32), dtype=wp.int32, device=device)
+            self.corners = wp.array(pack_corners(to_local[tets[order]], needs_force[to_global]), dtype=wp.uint64,
+                                    device=device)
+            rows = np.ascontiguousarray(dm_inv[order].reshape(len(order), 9).T, dtype=np.float32)
+            self.dm_rows = wp.array(rows, dtype=float, device=device)
+            self.kernel = packed_kernel(n_nodes, variant == "atomic", n_force)
 
     @classmethod
-    def for_mesh(cls, mesh, needs_force: np.ndarray, device, colored: bool = True,
-                 cap: int | None = None) -> "ResidentLayout":
+    def for_mesh(cls, mesh, needs_force: np.ndarray, device, colored: bool = True, cap: int | None = None,
+                 variant: str = "tiles", coloring: str = "mesh_order") -> "ResidentLayout":
         """The layout of the tets with a node that needs its force (the streamed kernels' moving tets);
         `cap` = the block size: colours of at most one chunk each."""
         tets = mesh.tets[needs_force[mesh.tets].any(axis=1)]
-        return cls(tets, rest_shape(mesh.nodes, tets)[0], needs_force, device, colored, cap)
+        return cls(tets, rest_shape(mesh.nodes, tets)[0], needs_force, device, colored, cap, variant, coloring)
+
+    def constants(self, lanes: int) -> list:
+        """The kernel's mesh-constant arguments (before inv_mass) for blocks of `lanes` threads."""
+        if self.variant in ("tiles", "onesync"):
+            return [self.tets, self.dm_inv, self.color_start, self.n_colors, self.need]
+        if lanes != self.lanes:
+            raise ValueError(f"resident_variant {self.variant}: the layout has chunks for {self.lanes} lanes, "
+                             f"the launch {lanes}; build the twin after setting wp.config.enable_cpu_blocks")
+        return [self.corners, self.dm_rows, self.chunk_start, self.chunk_end, self.n_chunks]
+
+    def node_order(self) -> list:
+        """The packed kernels' last argument: their node numbering (identity unless "compact")."""
+        return [] if self.variant in ("tiles", "onesync") else [self.local_to_global]
+
+
+def block_lanes(device, block_dim: int) -> int:
+    """Threads a block of `wp.launch_tiled` gets: one on the CPU unless cooperative CPU blocks are on."""
+    return block_dim if wp.get_device(device).is_cuda or wp.config.enable_cpu_blocks else 1
 
 
 def launch_resident(sim, block_dim: int) -> None:
     """All substeps of one frame of `sim` (a BatchedTwin) in one launch: one block per env."""
     lay, d = sim.resident, sim.cfg.damping
+    consts = lay.constants(block_lanes(sim.device, block_dim))
     wp.launch_tiled(lay.kernel, dim=[sim.n_envs], block_dim=block_dim, device=sim.device,
-                    inputs=[lay.tets, lay.dm_inv, lay.color_start, lay.n_colors, lay.need, sim.inv_mass,
-                            sim.fixed, sim.on_surface, sim.env_mu, sim.env_lam, d.alpha, d.beta, sim.dt,
-                            sim.substeps, sim.contact, sim.v_ctl],
-                    outputs=[sim.x, sim.v, sim.f_c, sim.contact_flag])
+                    inputs=[*consts, sim.inv_mass, sim.fixed, sim.on_surface, sim.env_mu, sim.env_lam,
+                            d.alpha, d.beta, sim.dt, sim.substeps, sim.contact, sim.v_ctl],
+                    outputs=[sim.x, sim.v, sim.f_c, sim.contact_flag, *lay.node_order()])

@@ -61,7 +61,9 @@ class BatchedTwin:
         slots, start = force_slots(mesh.tets[moving_ix], needs_force, N, run_index)  # sums in mesh order
         moving_ix = moving_ix[np.argsort(run_index)]
         # the frame-resident kernel's layout (cfg.integrator.kernel, issue 17)
-        self.resident = (ResidentLayout.for_mesh(mesh, needs_force, dev, cap=cfg.integrator.block_dim)
+        ig = cfg.integrator
+        self.resident = (ResidentLayout.for_mesh(mesh, needs_force, dev, cap=ig.block_dim, variant=ig.resident_variant,
+                                                 coloring=ig.resident_coloring)
                          if cfg.integrator.kernel == "resident" else None)
         self.tet_order = np.concatenate([moving_ix, np.flatnonzero(~moving)])
         self.n_force_tets = len(moving_ix)
