@@ -14,10 +14,10 @@ out=${1:-results/bench}
 mesh_dir=${MESH_DIR:-results/twin}
 dev=${DEVICE:-cuda:0}
 res=${RESOLUTION:-reference}
-# VARIANT[:COLORING]@BLOCK_DIM, most telling first; "compact" at 256/320 threads fits two blocks an SM
-points=${POINTS:-packed@512 tiles@512 compact@256 atomic@512 packed:largest_first@512 compact@320 onesync@512}
-bench_until=${BENCH_UNTIL_S:-300}  # start no benchmark point after this many seconds
-budget_s=${BUDGET_S:-450}  # start no agreement run after this many seconds
+# VARIANT[:COLORING]@BLOCK_DIM, most telling first; "compact" fits two blocks an SM (<= 384 threads)
+points=${POINTS:-packed@512 tiles@512 compact@320 atomic@512 compact@384 compact@256 packed:largest_first@512 onesync@512}
+bench_until=${BENCH_UNTIL_S:-330}  # start no benchmark point after this many seconds
+budget_s=${BUDGET_S:-460}  # start no agreement run after this many seconds
 mkdir -p "$out"
 [ -f "$mesh_dir/mesh_$res.npz" ] || { echo "gpu_resident_variants: $mesh_dir/mesh_$res.npz missing:" \
   "carry results/twin or set MESH_DIR" >&2; exit 2; }

@@ -78,7 +78,7 @@ class IntegratorConfig:
     # the resident kernel's variant (twin/resident_sync.py): "tiles" (a barrier per tile write, the
     # first version), "onesync" / "packed" (one barrier per colour chunk; packed, prefetched mesh
     # constants: the same bits as "tiles"), "atomic" (shared atomics, full chunks; GPU sums unordered),
-    # "compact" ("packed" with a force tile over the force nodes only: 111 KB, two 256-thread blocks an SM)
+    # "compact" ("packed" with a force tile over the force nodes only: 111 KB, two blocks of <= 384 an SM)
     resident_variant: str = "tiles"
     resident_coloring: str = "mesh_order"  # or "largest_first": 41 colour chunks at reference, not 44
 

@@ -215,7 +215,8 @@ class ResidentLayout:
                                     device=device)
             rows = np.ascontiguousarray(dm_inv[order].reshape(len(order), 9).T, dtype=np.float32)
             self.dm_rows = wp.array(rows, dtype=float, device=device)
-            self.kernel = packed_kernel(n_nodes, variant == "atomic", n_force)
+            bounds = (cap or 512, 2) if n_force else (512, 1)  # compact: registers for two blocks an SM
+            self.kernel = packed_kernel(n_nodes, variant == "atomic", n_force, bounds)
 
     @classmethod
     def for_mesh(cls, mesh, needs_force: np.ndarray, device, colored: bool = True, cap: int | None = None,

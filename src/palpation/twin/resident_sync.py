@@ -19,8 +19,9 @@ write shared tiles directly, so these kernels keep exactly those barriers:
   atomics, so CUDA runs are not bit-reproducible (rounding only); one CPU lane sums in colour order
   (the bits of "tiles" with one lane).
 * "compact": "packed" with the nodes renumbered force nodes first, so the force tile holds only the
-  force nodes (reference: x, v, f = 111,200 B instead of 123,696): two blocks of <= 320 threads fit
-  an H100/H200 SM, and one block's barriers no longer idle it. The same bits as "packed".
+  force nodes (reference: x, v, f = 111,200 B instead of 123,696): two blocks of <= 384 threads fit
+  an H100/H200 SM (launch bounds cap the registers), and one block's barriers no longer idle it.
+  The same bits as "packed".
 """
 
 # no `from __future__ import annotations`: the tile annotations of the native helpers name closure
@@ -200,11 +201,12 @@ def onesync_kernel(n_nodes: int):
 
 
 @functools.lru_cache(maxsize=None)
-def packed_kernel(n_nodes: int, atomic: bool, n_force: int = 0):
+def packed_kernel(n_nodes: int, atomic: bool, n_force: int = 0, bounds: tuple[int, int] = (512, 1)):
     """Packed constants, next chunk prefetched; colour chunks + plain adds, or mesh order + atomics.
 
     n_force > 0 ("compact"): the nodes are renumbered force nodes first (`local_to_global`), so the
-    force tile holds the n_force nodes that need a force only."""
+    force tile holds the n_force nodes that need a force only. `bounds` = CUDA launch bounds (threads,
+    blocks an SM): (block_dim, 2) caps the registers so that two blocks fit (65,536 / 2 / block_dim)."""
     compact = n_force > 0
     n_f = n_force if compact else n_nodes
     add_plain, add_atomic = tile_writers(n_f)[:2]
@@ -221,7 +223,7 @@ def packed_kernel(n_nodes: int, atomic: bool, n_force: int = 0):
     def load_dm(dm: wp.array2d[float], t: int):
         return wp.mat33(dm[0, t], dm[1, t], dm[2, t], dm[3, t], dm[4, t], dm[5, t], dm[6, t], dm[7, t], dm[8, t])
 
-    @wp.kernel(enable_backward=False, module="unique", launch_bounds=512)
+    @wp.kernel(enable_backward=False, module="unique", launch_bounds=bounds)
     def frame_packed(corners: wp.array[wp.uint64], dm: wp.array2d[float], chunk_start: wp.array[wp.int32],
                      chunk_end: wp.array[wp.int32], n_chunks: int, inv_mass: wp.array[float],
                      fixed: wp.array[wp.int32], on_surface: wp.array[wp.int32], env_mu: wp.array[float],
