@@ -32,7 +32,6 @@ import functools
 import numpy as np
 import warp as wp
 
-from palpation.twin.config import RESIDENT_VARIANTS as VARIANTS  # noqa: F401 (re-exported)
 from palpation.twin.contact import ContactParams, surface_contact_force
 from palpation.twin.elasticity import tet_forces
 
@@ -48,7 +47,7 @@ def pack_corners(tets: np.ndarray, needs_force: np.ndarray) -> np.ndarray:
     """One uint64 a tet: corner k's node index in bits 16k..16k+14, its need-force flag in bit 16k+15."""
     tets = np.asarray(tets, np.int64)
     if tets.size and tets.max() >= NEED_BIT:
-        raise ValueError(f"resident_variant packed/atomic: {tets.max() + 1} nodes exceed the {NEED_BIT} "
+        raise ValueError(f"resident_variant packed/atomic/compact: {tets.max() + 1} nodes exceed the {NEED_BIT} "
                          "that a 16-bit corner field holds; use integrator.resident_variant='onesync'")
     fields = (tets | np.where(needs_force[tets], NEED_BIT, 0)).astype(np.uint64)
     return (fields[:, 0] | fields[:, 1] << np.uint64(16) | fields[:, 2] << np.uint64(32)
