@@ -16,7 +16,7 @@ mesh_dir=${MESH_DIR:-results/twin}
 dev=${DEVICE:-cuda:0}
 res=${RESOLUTION:-reference}
 # VARIANT[:COLORING]@BLOCK_DIM, most telling first; "compact" fits two blocks an SM (<= 384 threads)
-points=${POINTS:-packed@512 tiles@512 compact@320 atomic@512 compact@384 compact@256 packed:largest_first@512 onesync@512}
+points=${POINTS:-packed@512 tiles@512 compact@320 atomic@512 compact@384 compact_atomic@384 compact@256 packed:largest_first@512 onesync@512}
 bench_until=${BENCH_UNTIL_S:-260}  # start no benchmark point after this many seconds
 budget_s=${BUDGET_S:-440}  # start no agreement run after this many seconds
 mkdir -p "$out"

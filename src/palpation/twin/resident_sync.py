@@ -21,7 +21,7 @@ write shared tiles directly, so these kernels keep exactly those barriers:
 * "compact": "packed" with the nodes renumbered force nodes first, so the force tile holds only the
   force nodes (reference: x, v, f = 111,200 B instead of 123,696): two blocks of <= 384 threads fit
   an H100/H200 SM (launch bounds cap the registers), and one block's barriers no longer idle it.
-  The same bits as "packed".
+  The same bits as "packed". "compact_atomic": "compact" with the atomics of "atomic".
 """
 
 # no `from __future__ import annotations`: the tile annotations of the native helpers name closure
