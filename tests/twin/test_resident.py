@@ -110,14 +110,15 @@ def test_one_lane_cpu_blocks_take_any_block_dim(mesh, variant):
     np.testing.assert_array_equal(got, ref)
 
 
-def test_atomic_variant(mesh, cpu_lanes):
+@pytest.mark.parametrize("variant", ["atomic", "compact_atomic"])
+def test_atomic_variants(mesh, cpu_lanes, variant):
     """One lane sums in colour order (the bits of tiles); 16 lanes differ by rounding only."""
     wp.config.enable_cpu_blocks = False
     ref, _ = _press(mesh, "resident", block_dim=64)
-    one, _ = _press(mesh, "resident", block_dim=64, variant="atomic")
+    one, _ = _press(mesh, "resident", block_dim=64, variant=variant)
     np.testing.assert_array_equal(one, ref)
     wp.config.enable_cpu_blocks = True
-    got, sim = _press(mesh, "resident", block_dim=cpu_lanes, variant="atomic")
+    got, sim = _press(mesh, "resident", block_dim=cpu_lanes, variant=variant)
     moved = np.abs(ref[-1] - ref[0]).max()
     assert 0 < np.abs(got - ref).max() < 1e-4 * moved and sim.contact_flags()[0]
 

@@ -103,7 +103,7 @@ def time_substeps(mesh: SensorMesh, n_envs: int, n_substeps: int = 124, device: 
     if sim.resident is not None:
         nbytes = resident_substep_bytes(mesh.n_nodes, sim.n_force_tets, len(mesh.surface_nodes),
                                         int(mesh.fixed.sum()), n_envs, n_substeps,
-                                        packed=sim.resident.variant in ("packed", "atomic", "compact"))
+                                        packed=sim.resident.variant not in ("tiles", "onesync"))
     else:
         nbytes = substep_bytes(mesh.n_nodes, sim.n_force_tets, len(mesh.surface_nodes), n_envs, sim.gather)
     bw = device_bandwidth(sim.device)

@@ -175,7 +175,8 @@ class ResidentLayout:
     """Device arrays of the resident kernel for one mesh: coloured moving tets, Dm^-1, node masks.
 
     `variant` (twin.integrator.resident_variant) picks the kernel: "tiles" (resident_kernel, a
-    barrier per tile write), or "onesync", "packed", "atomic", "compact" (twin/resident_sync.py)."""
+    barrier per tile write), or "onesync", "packed", "atomic", "compact", "compact_atomic"
+    (twin/resident_sync.py)."""
 
     def __init__(self, tets: np.ndarray, dm_inv: np.ndarray, needs_force: np.ndarray, device,
                  colored: bool = True, cap: int | None = None, variant: str = "tiles",
@@ -187,7 +188,8 @@ class ResidentLayout:
         order, start = (color_tets(tets, needs_force, cap, coloring) if colored
                         else (np.arange(len(tets)), [0, len(tets)]))
         start = np.asarray(start, np.int32)
-        if variant == "atomic":  # colour order (a warp's tets rarely share a node, so its atomics rarely
+        atomic = variant in ("atomic", "compact_atomic")
+        if atomic:  # colour order (a warp's tets rarely share a node, so its atomics rarely
             start = start[[0, -1]]  # collide), full chunks across colours: no barrier between them
         self.variant = variant
         self.n_colors = len(start) - 1
@@ -206,7 +208,7 @@ class ResidentLayout:
             self.chunk_start = wp.array(cs, dtype=wp.int32, device=device)
             self.chunk_end = wp.array(ce, dtype=wp.int32, device=device)
             # "compact": nodes renumbered force nodes first, so the force tile covers those only
-            n_force = int(needs_force.sum()) if variant == "compact" else 0
+            n_force = int(needs_force.sum()) if variant.startswith("compact") else 0
             to_global = (np.concatenate([np.flatnonzero(needs_force), np.flatnonzero(~needs_force)])
                          if n_force else np.arange(n_nodes))
             to_local = np.argsort(to_global)
@@ -215,7 +217,8 @@ class ResidentLayout:
                                     device=device)
             rows = np.ascontiguousarray(dm_inv[order].reshape(len(order), 9).T, dtype=np.float32)
             self.dm_rows = wp.array(rows, dtype=float, device=device)
-            self.kernel = packed_kernel(n_nodes, variant == "atomic", n_force)
+            bounds = (cap or 512, 2) if n_force else (512, 1)  # compact: registers for two blocks an SM
+            self.kernel = packed_kernel(n_nodes, atomic, n_force, bounds)
 
     @classmethod
     def for_mesh(cls, mesh, needs_force: np.ndarray, device, colored: bool = True, cap: int | None = None,
@@ -235,7 +238,7 @@ class ResidentLayout:
         return [self.corners, self.dm_rows, self.chunk_start, self.chunk_end, self.n_chunks]
 
     def node_order(self) -> list:
-        """The packed kernels' last argument: their node numbering (identity unless "compact")."""
+        """The packed kernels' last argument: their node numbering (identity unless "compact*")."""
         return [] if self.variant in ("tiles", "onesync") else [self.local_to_global]
 
 

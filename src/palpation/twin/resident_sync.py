@@ -19,8 +19,9 @@ write shared tiles directly, so these kernels keep exactly those barriers:
   atomics, so CUDA runs are not bit-reproducible (rounding only); one CPU lane sums in colour order
   (the bits of "tiles" with one lane).
 * "compact": "packed" with the nodes renumbered force nodes first, so the force tile holds only the
-  force nodes (reference: x, v, f = 111,200 B instead of 123,696): two blocks of <= 320 threads fit
-  an H100/H200 SM, and one block's barriers no longer idle it. The same bits as "packed".
+  force nodes (reference: x, v, f = 111,200 B instead of 123,696): two blocks of <= 384 threads fit
+  an H100/H200 SM (launch bounds cap the registers), and one block's barriers no longer idle it.
+  The same bits as "packed". "compact_atomic": "compact" with the atomics of "atomic".
 """
 
 # no `from __future__ import annotations`: the tile annotations of the native helpers name closure
@@ -31,7 +32,6 @@ import functools
 import numpy as np
 import warp as wp
 
-from palpation.twin.config import RESIDENT_VARIANTS as VARIANTS  # noqa: F401 (re-exported)
 from palpation.twin.contact import ContactParams, surface_contact_force
 from palpation.twin.elasticity import tet_forces
 
@@ -47,7 +47,7 @@ def pack_corners(tets: np.ndarray, needs_force: np.ndarray) -> np.ndarray:
     """One uint64 a tet: corner k's node index in bits 16k..16k+14, its need-force flag in bit 16k+15."""
     tets = np.asarray(tets, np.int64)
     if tets.size and tets.max() >= NEED_BIT:
-        raise ValueError(f"resident_variant packed/atomic: {tets.max() + 1} nodes exceed the {NEED_BIT} "
+        raise ValueError(f"resident_variant packed/atomic/compact: {tets.max() + 1} nodes exceed the {NEED_BIT} "
                          "that a 16-bit corner field holds; use integrator.resident_variant='onesync'")
     fields = (tets | np.where(needs_force[tets], NEED_BIT, 0)).astype(np.uint64)
     return (fields[:, 0] | fields[:, 1] << np.uint64(16) | fields[:, 2] << np.uint64(32)
@@ -200,11 +200,12 @@ def onesync_kernel(n_nodes: int):
 
 
 @functools.lru_cache(maxsize=None)
-def packed_kernel(n_nodes: int, atomic: bool, n_force: int = 0):
+def packed_kernel(n_nodes: int, atomic: bool, n_force: int = 0, bounds: tuple[int, int] = (512, 1)):
     """Packed constants, next chunk prefetched; colour chunks + plain adds, or mesh order + atomics.
 
     n_force > 0 ("compact"): the nodes are renumbered force nodes first (`local_to_global`), so the
-    force tile holds the n_force nodes that need a force only."""
+    force tile holds the n_force nodes that need a force only. `bounds` = CUDA launch bounds (threads,
+    blocks an SM): (block_dim, 2) caps the registers so that two blocks fit (65,536 / 2 / block_dim)."""
     compact = n_force > 0
     n_f = n_force if compact else n_nodes
     add_plain, add_atomic = tile_writers(n_f)[:2]
@@ -221,7 +222,7 @@ def packed_kernel(n_nodes: int, atomic: bool, n_force: int = 0):
     def load_dm(dm: wp.array2d[float], t: int):
         return wp.mat33(dm[0, t], dm[1, t], dm[2, t], dm[3, t], dm[4, t], dm[5, t], dm[6, t], dm[7, t], dm[8, t])
 
-    @wp.kernel(enable_backward=False, module="unique", launch_bounds=512)
+    @wp.kernel(enable_backward=False, module="unique", launch_bounds=bounds)
     def frame_packed(corners: wp.array[wp.uint64], dm: wp.array2d[float], chunk_start: wp.array[wp.int32],
                      chunk_end: wp.array[wp.int32], n_chunks: int, inv_mass: wp.array[float],
                      fixed: wp.array[wp.int32], on_surface: wp.array[wp.int32], env_mu: wp.array[float],
