@@ -74,13 +74,15 @@ class IntegratorConfig:
     # the CPU path); "resident": one launch per frame, each env's x, v, f in one block's shared
     # memory (twin/resident.py, issue 17; SDF contact and the plain elastic kernel only)
     kernel: str = "streamed"
-    block_dim: int = 512  # threads per env block of the resident kernel (<= 512: 106 registers a thread)
+    # threads per env block of the resident kernel (<= 512: 106 registers a thread; compact <= 384, two blocks an SM).
+    # 320 with compact: the fastest point of the H200 variant run, 12.63 s for 500 reference envs (docs/twin.md)
+    block_dim: int = 320
     # the resident kernel's variant (twin/resident_sync.py): "tiles" (a barrier per tile write, the
     # first version), "onesync" / "packed" (one barrier per colour chunk; packed, prefetched mesh
     # constants: the same bits as "tiles"), "atomic" (shared atomics, full chunks; GPU sums unordered),
     # "compact" ("packed" with a force tile over the force nodes only: 111 KB, two blocks of <= 384 an SM),
     # "compact_atomic" (both)
-    resident_variant: str = "tiles"
+    resident_variant: str = "compact"
     resident_coloring: str = "mesh_order"  # or "largest_first": 41 colour chunks at reference, not 44
 
 
