@@ -89,7 +89,8 @@ def seed_rows(config, run, res, partner, p_run, p_res, calibrations) -> list[dic
         out.append({"calibration": name, "fitted_on": fitted_on, "map_threshold_from": map_from,
                     "ece": ece(probs, labels), "pos_share_05": positive_share(probs), "brier": brier(probs, labels),
                     "ap": float(average_precision_score(labels, probs)), **map_at(res, thr),
-                    "d_bar_05_mm": map_at(res, t05)["d_bar_mm"], "probs": probs})
+                    **{f"{k.removesuffix('_mm')}_05{'_mm' if k.endswith('_mm') else ''}": v
+                       for k, v in map_at(res, t05).items() if k != "map_pred_px"}, "probs": probs})
     return out
 
 
@@ -104,7 +105,7 @@ def row_figures(config, recipe, switch, seeds: list[list[dict]]) -> list[dict]:
                      "seeds": len(per), "ece": mean("ece"),
                      "ece_std": float(np.std([p["ece"] for p in per], ddof=1)) if len(per) > 1 else float("nan"),
                      **{k: mean(k) for k in ("pos_share_05", "brier", "ap", "d_bar_mm", "map_recall", "map_pred_px",
-                                              "d_bar_05_mm")},
+                                              "d_bar_05_mm", "map_recall_05")},
                      "d_bar_05_seeds": int(sum(p["d_bar_05_mm"] == p["d_bar_05_mm"] for p in per))})  # with a pixel
     return rows
 

@@ -128,7 +128,7 @@ RECIPE_ABLATION_COLUMNS = ("config", "recipe", "switch_off", "seeds", "auroc_mea
 UNCERTAINTY_COLUMNS = ("config", "coverage", "precision", "recall")
 CROSSFIT_COLUMNS = ("config", "recipe", "switch_off", "calibration", "fitted_on", "seeds", "ece", "ece_std",
                     "pos_share_05", "brier", "ap", "d_bar_mm", "map_recall", "map_pred_px", "map_threshold_from",
-                    "d_bar_05_mm", "d_bar_05_seeds")
+                    "d_bar_05_mm", "map_recall_05", "d_bar_05_seeds")
 
 
 def recipe_ablation(rows: list[dict]) -> pd.DataFrame:
