@@ -34,7 +34,7 @@ def _res(run, threshold):
 
 def _rows(x_run, x_res, y_run, y_res, partner="A-to-C"):
     return {r["calibration"]: r for r in seed_rows("A-to-B", x_run, x_res, partner, y_run, y_res,
-                                                   ["stored", "cross_real", "in_sample"])}
+                                                   ["stored", "cross_real", "cross_real_shift", "in_sample"])}
 
 
 def test_own_labels_and_own_map_choose_nothing():
@@ -44,13 +44,15 @@ def test_own_labels_and_own_map_choose_nothing():
     # X's labels flipped and its own map threshold moved: cross_real's scores and map threshold stay
     x_flip = _run(xr, 1 - xy)
     moved = _rows(x_flip, _res(x_flip, 0.2), y, _res(y, 0.7))
-    np.testing.assert_array_equal(moved["cross_real"]["probs"], base["cross_real"]["probs"])
-    assert moved["cross_real"]["map_pred_px"] == base["cross_real"]["map_pred_px"]
+    for name in ("cross_real", "cross_real_shift"):
+        np.testing.assert_array_equal(moved[name]["probs"], base[name]["probs"])
+        assert moved[name]["map_pred_px"] == base[name]["map_pred_px"]
     assert moved["stored"]["map_pred_px"] != base["stored"]["map_pred_px"]  # the quirk-18 row uses its own map
     # the partner's labels and map are what cross_real is fitted on
     y_flip = _run(yr, 1 - yy)
     other = _rows(x, _res(x, 0.6), y_flip, _res(y_flip, 0.3))
     assert not np.array_equal(other["cross_real"]["probs"], base["cross_real"]["probs"])
+    assert not np.array_equal(other["cross_real_shift"]["probs"], base["cross_real_shift"]["probs"])
     assert other["cross_real"]["map_pred_px"] != base["cross_real"]["map_pred_px"]
     assert base["cross_real"]["fitted_on"] == "meat (A-to-C scores)"
     assert base["cross_real"]["map_threshold_from"] == "meat map (SPEC §12 rule)"
@@ -107,3 +109,20 @@ def test_partners_and_calibrations_are_checked_before_any_work(tmp_path):
                        ({"calibrations": ["platt_on_test"]}, "unknown calibration")):
         with pytest.raises(ValueError, match=match):
             run(OmegaConf.create({**base, **bad}))
+
+
+def test_cross_real_shift_keeps_the_stored_slope():
+    """Only the intercept moves: the calibrated logit minus the stored logit is one constant, the one a shift fit on
+    the partner's stored scores gives."""
+    from palpation.metrics.calibration import logit
+
+    (xr, xy), (yr, yy) = _set(0, 2.0), _set(1, -1.0)
+    x, y = _run(xr, xy), _run(yr, yy)
+    got = _rows(x, _res(x, 0.5), y, _res(y, 0.5))["cross_real_shift"]
+    diff = logit(got["probs"]) - logit(x["scores_arrays"]["probs"])
+    b = fit_calibrator(y["scores_arrays"]["probs"], yy, "shift").shift
+    ok = (np.minimum(x["scores_arrays"]["probs"], got["probs"]) > 1e-4) & (
+        np.maximum(x["scores_arrays"]["probs"], got["probs"]) < 1 - 1e-4)  # off the float32 ends
+    assert ok.mean() > 0.5
+    np.testing.assert_allclose(diff[ok], b, atol=1e-3)
+    assert got["fitted_on"] == "meat (A-to-C scores; slope sim_val)"

@@ -79,3 +79,11 @@ def test_brier_known_values():
     assert brier([1.0, 0.0, 0.5, 0.5], [1, 0, 1, 0]) == pytest.approx(0.125)
     with pytest.raises(ValueError, match="matching"):
         brier([0.1], [1, 0])
+
+
+def test_shift_recovers_a_pure_prior_shift():
+    rng = np.random.default_rng(3)
+    z = rng.normal(-2.0, 2.0, 40_000)
+    y = (rng.random(z.size) < 1 / (1 + np.exp(-z))).astype(np.int8)
+    cal = fit_calibrator(1 / (1 + np.exp(-(z + 1.5))), y, "shift")  # scores 1.5 logits too high
+    assert cal.method == "shift" and cal.scale == 1.0 and cal.shift == pytest.approx(-1.5, abs=0.05)

@@ -30,7 +30,7 @@ from palpation.metrics.calibration import Calibrator, brier, cross_fit, ece, fit
 from palpation.report.tables import crossfit_table
 
 log = logging.getLogger(__name__)
-CALIBRATIONS = ("stored", "cross_real", "in_sample")
+CALIBRATIONS = ("stored", "cross_real", "cross_real_shift", "in_sample")
 
 
 def stored_calibrator(metrics: dict) -> Calibrator:
@@ -61,8 +61,13 @@ def map_at(res, threshold: float) -> dict:
     return {"d_bar_mm": st["distance_mm"]["mean"], "map_recall": st["recall"], "map_pred_px": st["distance_mm"]["n"]}
 
 
+def _partner_threshold(own: Calibrator, p_res, p_own: Calibrator) -> float:
+    """The partner map's SPEC §12 threshold, carried to this run's stored scale through the raw score."""
+    return float(own.apply(to_raw(np.array([p_res.op.threshold]), p_own))[0])
+
+
 def seed_rows(config, run, res, partner, p_run, p_res, calibrations) -> list[dict]:
-    """One seed's figures per calibration. Only the partner's scores and map fit `cross_real`."""
+    """One seed's figures per calibration. Only the partner's scores and map fit `cross_real(_shift)`."""
     s, own = run["scores_arrays"], stored_calibrator(run["metrics"])
     raw, labels = to_raw(s["probs"], own), s["labels"]
     val_name = f"{run['metrics']['train_on']}_val"
@@ -76,12 +81,22 @@ def seed_rows(config, run, res, partner, p_run, p_res, calibrations) -> list[dic
         elif partner is None:  # no other real set: the stored (training domain's val) calibration and its 0.5
             fitted_on = val_name if own.method != "none" else "none"
             thr, map_from = 0.5, "0.5 of the stored scores"
+        elif name == "cross_real_shift":  # the stored slope kept, only the intercept refitted on the partner
+            ps, p_own = p_run["scores_arrays"], stored_calibrator(p_run["metrics"])
+            if p_own != own:
+                raise ValueError(f"{config}: cross_real_shift needs the partner {partner} written with the same "
+                                 "calibration (the same models); drop it from calibrations")
+            b = cross_fit({partner: (ps["probs"], ps["labels"])}, {config: partner}, "shift")[config].shift
+            cal = Calibrator("platt", own.scale, own.shift + b, own.n_fit) if own.method != "none" else \
+                Calibrator("shift", 1.0, b)
+            slope = val_name if own.method != "none" else "1"
+            fitted_on = f"{TEST_DATASET[partner]} ({partner} scores; slope {slope})"
+            thr, map_from = _partner_threshold(own, p_res, p_own), f"{TEST_DATASET[partner]} map (SPEC §12 rule)"
         else:
             ps, p_own = p_run["scores_arrays"], stored_calibrator(p_run["metrics"])
             cal = cross_fit({partner: (to_raw(ps["probs"], p_own), ps["labels"])}, {config: partner})[config]
             fitted_on = f"{TEST_DATASET[partner]} ({partner} scores)"
-            # the partner map's SPEC §12 threshold, carried to this run's stored scale through the raw score
-            thr = float(own.apply(to_raw(np.array([p_res.op.threshold]), p_own))[0])
+            thr = _partner_threshold(own, p_res, p_own)
             map_from = f"{TEST_DATASET[partner]} map (SPEC §12 rule)"
         probs = s["probs"] if cal is None else cal.apply(raw)
         # calibrated >= 0.5  <=>  raw >= sigmoid(-shift / scale): that point on the stored scale (maps: max per pixel)

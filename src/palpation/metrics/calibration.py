@@ -2,7 +2,7 @@
 fitted on the training domain's validation split, expected calibration error and reliability bins.
 
 A calibrated score of 0.5 means "more likely than not". Temperature scaling (z / T) keeps the
-ranking and the 0.5 point; Platt scaling (a·z + b, a logistic regression on the logit)
+ranking and the 0.5 point; a shift (z + b) moves only the 0.5 point; Platt scaling (a·z + b, a logistic regression on the logit)
 also moves the 0.5 point, which the focal loss's α shifts (α ≈ 0.96 weighs positives 24×); both are
 fitted by maximum likelihood with scipy, the Platt slope kept positive.
 
@@ -69,7 +69,10 @@ def fit_calibrator(probs, labels, method: str) -> Calibrator:
         res = minimize(lambda ab: _nll(ab[0] * z + ab[1], y), x0=np.array([1.0, 0.0]), method="L-BFGS-B",
                        bounds=[(1e-3, 1e3), (-50.0, 50.0)], options={"ftol": 1e-12, "gtol": 1e-9})
         return Calibrator("platt", float(res.x[0]), float(res.x[1]), int(y.size))
-    raise ValueError(f"unknown calibration method '{method}': use none, temperature or platt")
+    if method == "shift":  # intercept only (a prior shift in logit): keeps the slope the scores already have
+        res = minimize_scalar(lambda b: _nll(z + b, y), bounds=(-50.0, 50.0), method="bounded", options={"xatol": 1e-9})
+        return Calibrator("shift", 1.0, float(res.x), int(y.size))
+    raise ValueError(f"unknown calibration method '{method}': use none, temperature, platt or shift")
 
 
 def reliability(probs, labels, n_bins: int = N_BINS) -> dict:
