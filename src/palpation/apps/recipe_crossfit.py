@@ -26,7 +26,8 @@ from palpation.figures.recipe import reliability_figure
 from palpation.io import atomic_path, save_figure, save_json
 from palpation.mapping.pipeline import TEST_DATASET, MapSettings, config_maps
 from palpation.mapping.stats import map_stats
-from palpation.metrics.calibration import Calibrator, brier, cross_fit, ece, fit_calibrator, positive_share
+from palpation.metrics.calibration import (Calibrator, brier, cross_fit, ece, fit_calibrator, positive_share,
+                                         reliability)
 from palpation.report.tables import crossfit_table
 
 log = logging.getLogger(__name__)
@@ -125,6 +126,14 @@ def row_figures(config, recipe, switch, seeds: list[list[dict]]) -> list[dict]:
     return rows
 
 
+def _used_bins(probs, labels) -> dict:
+    """The figure's reliability bins (pooled over seeds), the non-empty ones: lower edge, mean score, share, count."""
+    r = reliability(probs, labels)
+    used = r["count"] > 0
+    return {"lower_edge": r["edges"][:-1][used].tolist(), "confidence": r["confidence"][used].tolist(),
+            "frequency": r["frequency"][used].tolist(), "count": r["count"][used].tolist()}
+
+
 def run(cfg: DictConfig) -> dict:
     c = OmegaConf.to_container(cfg, resolve=True)
     c.pop("hydra", None)
@@ -183,7 +192,8 @@ def run(cfg: DictConfig) -> dict:
     table = crossfit_table(rows)
     with atomic_path(out / "recipe_calibration_crossfit.csv") as tmp:
         table.to_csv(tmp, index=False, float_format="%.6g")
-    save_json(out / "recipe_calibration_crossfit.json", {"rows": rows, "same_model": checks,
+    bins = {panel: {curve: _used_bins(*pl) for curve, pl in curves.items()} for panel, curves in panels.items()}
+    save_json(out / "recipe_calibration_crossfit.json", {"rows": rows, "same_model": checks, "reliability": bins,
                                                          "partners": c["partners"], "seeds": c["seeds"]})
     save_figure(reliability_figure(panels, "Reliability of the test scores: stored vs cross-fitted calibration"),
                 out / "reliability_crossfit")
