@@ -75,8 +75,8 @@ def seed_rows(config, run, res, partner, p_run, p_res, calibrations) -> list[dic
     out = []
     for name in calibrations:
         cal, thr, map_from = None, res.op.threshold, "test map (SPEC §12, quirk 18)"
-        if name == "stored":
-            fitted_on = val_name if own.method != "none" else "none"
+        if name == "stored":  # a run trained with calibration=cross_real names its partner
+            fitted_on = run["metrics"].get("calibration_fitted_on", val_name) if own.method != "none" else "none"
         elif name == "in_sample":  # a bound, not a result: Platt fitted on the test set itself
             cal, fitted_on = fit_calibrator(raw, labels, "platt"), f"{TEST_DATASET[config]} (itself: bound)"
         elif partner is None:  # no other real set: the stored (training domain's val) calibration and its 0.5
