@@ -206,3 +206,31 @@ def test_also_test_needs_seeds_and_the_run_layout(train_sets, tmp_path):
         run(compose_train(["experiment=A-to-B", "seeds=[0]", "also_uncalibrated=x", "tracking=false"]), tmp_path)
     with pytest.raises(ValueError, match="needs the run dir <root>/A-to-B/L5"):
         run(compose_train(["experiment=A-to-B", "seeds=[0]", "also_test=[A-to-C:meat]", "tracking=false"]), tmp_path)
+
+
+def test_cross_real_calibration_is_fitted_on_the_other_real_sets_scores(train_sets, tmp_path):
+    """calibration=cross_real (issue 15): each configuration's Platt scaling is the one fitted on the same seed's
+    models' raw scores on the other real set (A-to-B on A-to-C's, and back), never on its own test set; the
+    weights are those of the uncalibrated twins. Alone (no other real set) it is refused."""
+    from palpation.metrics.calibration import fit_calibrator
+
+    paths = [f"data.{k}={v}" for k, v in train_sets.items()]
+    tiny = ["model=compact", "clip_len=2", *TINY, "recipe.calibration=cross_real", "tracking=false", *paths]
+    root, raw_root = tmp_path / "x" / "A-to-B" / "L2", tmp_path / "raw"
+    runs = run(compose_train(["experiment=A-to-B", "seeds=[0,1]", "also_test=[A-to-C:meat]",
+                              f"also_uncalibrated={raw_root}", *tiny]), root)
+    cal, raw = runs[:4], runs[4:]
+    other = {"A-to-B": "A-to-C", "A-to-C": "A-to-B"}
+    for m in cal:
+        assert m["calibration_fitted_on"] == other[m["config"]]
+        partner = np.load(raw_root / other[m["config"]] / "L2" / f"seed{m['seed']}" / "scores.npz")
+        want = fit_calibrator(partner["probs"], partner["labels"], "platt")
+        assert Calibrator(**m["calibration"]) == want
+        own = np.load(raw_root / m["config"] / "L2" / f"seed{m['seed']}" / "scores.npz")
+        written = np.load(root.parents[1] / m["config"] / "L2" / f"seed{m['seed']}" / "scores.npz")
+        np.testing.assert_allclose(written["probs"], want.apply(own["probs"]), atol=1e-6)
+    assert [r["test"] for r in raw] == [m["test_raw"] for m in cal]
+    with pytest.raises(ValueError, match="cross_real fits on the same models' scores on another real set"):
+        run(compose_train(["experiment=A-to-B", "seed=0", *tiny]), tmp_path / "alone")
+    with pytest.raises(ValueError, match="exactly one other real test set"):
+        run(compose_train(["experiment=A-to-B", "seeds=[0]", *tiny]), tmp_path / "y" / "A-to-B" / "L2")

@@ -51,3 +51,39 @@ def test_identity_and_errors():
         fit_calibrator(p, np.zeros(2), "platt")
     with pytest.raises(ValueError, match="unknown calibration"):
         fit_calibrator(p, np.array([0, 1]), "isotonic")
+
+
+def test_cross_fit_never_reads_a_sets_own_labels(toy):
+    """Each set is calibrated on its partner: a set's own labels (even all flipped) leave its calibrator as it
+    was, its partner's labels change it; a set named as its own partner is refused."""
+    from palpation.metrics.calibration import cross_fit
+
+    over, y, _ = toy
+    a, b = (over[:20_000], y[:20_000]), (over[20_000:], y[20_000:])
+    pairs = {"a": "b", "b": "a"}
+    cals = cross_fit({"a": a, "b": b}, pairs)
+    flipped = cross_fit({"a": (a[0], 1 - a[1]), "b": b}, pairs)
+    assert flipped["a"] == cals["a"]  # a's labels changed nothing of a's calibration
+    assert flipped["b"] != cals["b"]  # they are b's calibration data
+    assert cals["a"] == fit_calibrator(*b, "platt")
+    assert cross_fit({"a": a}, {"a": None}) == {"a": None}
+    with pytest.raises(ValueError, match="its own partner"):
+        cross_fit({"a": a}, {"a": "a"})
+    with pytest.raises(ValueError, match="has no scores"):
+        cross_fit({"a": a}, {"a": "c"})
+
+
+def test_brier_known_values():
+    from palpation.metrics.calibration import brier
+
+    assert brier([1.0, 0.0, 0.5, 0.5], [1, 0, 1, 0]) == pytest.approx(0.125)
+    with pytest.raises(ValueError, match="matching"):
+        brier([0.1], [1, 0])
+
+
+def test_shift_recovers_a_pure_prior_shift():
+    rng = np.random.default_rng(3)
+    z = rng.normal(-2.0, 2.0, 40_000)
+    y = (rng.random(z.size) < 1 / (1 + np.exp(-z))).astype(np.int8)
+    cal = fit_calibrator(1 / (1 + np.exp(-(z + 1.5))), y, "shift")  # scores 1.5 logits too high
+    assert cal.method == "shift" and cal.scale == 1.0 and cal.shift == pytest.approx(-1.5, abs=0.05)

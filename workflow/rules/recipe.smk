@@ -178,3 +178,44 @@ rule recipe_report:
         " 'experiments={params.experiments}' 'seeds={params.seeds}' 'switches={params.switches}'"
         " 'switch_experiments={params.switch_experiments}'"
         " clip_len={params.clip_len} {params.data} hydra.run.dir={params.out_dir} > {log} 2>&1"
+
+
+# Calibration and map threshold cross-fitted between the two real sets (docs/recipe.md "Cross-fitted calibration"):
+# from the stored runs (no retraining), each Sim-trained model calibrated on its own scores on the other real set.
+# Not part of `all`: `snakemake results/recipe/report/recipe_calibration_crossfit.csv` (CPU, about a minute).
+if RECIPE_ABL["seeds"]:
+
+    rule recipe_crossfit:
+        input:
+            metrics=recipe_runs("metrics.json"),
+            scores=recipe_runs("scores.npz"),
+            data=list(dict.fromkeys(TRAIN_DATA[EXPERIMENTS[e].test_on] for e in RECIPE_ABL["experiments"])),  # the real sets
+            conf=conf_files("recipe_crossfit") + conf_files("vessel_maps"),
+        output:
+            [f"{RECIPE_REPORT}/{name}" for name in ("recipe_calibration_crossfit.csv",
+                                                    "recipe_calibration_crossfit.json", "reliability_crossfit.png",
+                                                    "reliability_crossfit.pdf")],
+        log:
+            "results/logs/recipe_crossfit.log",
+        benchmark:
+            "results/benchmarks/recipe_crossfit.tsv",
+        params:
+            rule="recipe_crossfit",
+            py=PY,
+            experiments=yaml_list(RECIPE_ABL["experiments"]),
+            seeds=yaml_list(RECIPE_ABL["seeds"]),
+            switches=yaml_list(RECIPE_ABL["switches"]),
+            switch_experiments=yaml_list(RECIPE_ABL.get("switch_experiments", RECIPE_ABL["experiments"])),
+            clip_len=TRAIN["clip_len"],
+            profile=PROFILE,
+            data=" ".join(f"data.{k}={v}" for k, v in TRAIN_DATA.items()),
+            runs_root=lambda wildcards, input: Path(input.metrics[0]).parents[5],
+            out_dir=lambda wildcards, output: Path(output[0]).parent,
+        conda:
+            CONDA_ENV
+        shell:
+            "PALPATION_PROFILE={params.profile} SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.recipe_crossfit"
+            " profile={params.profile} runs_root={params.runs_root} out_dir={params.out_dir}"
+            " 'experiments={params.experiments}' 'seeds={params.seeds}' 'switches={params.switches}'"
+            " 'switch_experiments={params.switch_experiments}'"
+            " clip_len={params.clip_len} {params.data} hydra.run.dir={params.out_dir} > {log} 2>&1"

@@ -2,9 +2,12 @@
 fitted on the training domain's validation split, expected calibration error and reliability bins.
 
 A calibrated score of 0.5 means "more likely than not". Temperature scaling (z / T) keeps the
-ranking and the 0.5 point; Platt scaling (a·z + b, a logistic regression on the logit)
+ranking and the 0.5 point; a shift (z + b) moves only the 0.5 point; Platt scaling (a·z + b, a logistic regression on the logit)
 also moves the 0.5 point, which the focal loss's α shifts (α ≈ 0.96 weighs positives 24×); both are
 fitted by maximum likelihood with scipy, the Platt slope kept positive.
+
+Cross-fitting between real sets (`cross_fit`, docs/recipe.md "Cross-fitted calibration"): a model deployed on
+one real set is calibrated on the same model's scores on another labelled real set, never on its own.
 """
 
 from __future__ import annotations
@@ -66,7 +69,10 @@ def fit_calibrator(probs, labels, method: str) -> Calibrator:
         res = minimize(lambda ab: _nll(ab[0] * z + ab[1], y), x0=np.array([1.0, 0.0]), method="L-BFGS-B",
                        bounds=[(1e-3, 1e3), (-50.0, 50.0)], options={"ftol": 1e-12, "gtol": 1e-9})
         return Calibrator("platt", float(res.x[0]), float(res.x[1]), int(y.size))
-    raise ValueError(f"unknown calibration method '{method}': use none, temperature or platt")
+    if method == "shift":  # intercept only (a prior shift in logit): keeps the slope the scores already have
+        res = minimize_scalar(lambda b: _nll(z + b, y), bounds=(-50.0, 50.0), method="bounded", options={"xatol": 1e-9})
+        return Calibrator("shift", 1.0, float(res.x), int(y.size))
+    raise ValueError(f"unknown calibration method '{method}': use none, temperature, platt or shift")
 
 
 def reliability(probs, labels, n_bins: int = N_BINS) -> dict:
@@ -89,6 +95,33 @@ def ece(probs, labels, n_bins: int = N_BINS) -> float:
     used = r["count"] > 0
     gap = np.abs(r["frequency"][used] - r["confidence"][used])
     return float(np.sum(r["count"][used] * gap) / r["count"].sum())
+
+
+def brier(probs, labels) -> float:
+    """Mean squared error of the scores against the 0/1 labels."""
+    p, y = np.asarray(probs, np.float64).ravel(), np.asarray(labels).ravel().astype(np.float64)
+    if p.shape != y.shape or p.size == 0:
+        raise ValueError(f"brier needs matching non-empty scores and labels, got {p.shape} and {y.shape}")
+    return float(np.mean((p - y) ** 2))
+
+
+def cross_fit(scores: dict[str, tuple], partners: dict[str, str | None], method: str = "platt"
+              ) -> dict[str, Calibrator | None]:
+    """Per set X, the calibrator fitted on the same model's (probs, labels) on `partners[X]`, never on X:
+    X's own labels cannot change its calibration. A set whose partner is None gets None (no other set to
+    fit on: the caller keeps the calibration it has). `scores` needs every named partner."""
+    out = {}
+    for name, other in partners.items():
+        if other is None:
+            out[name] = None
+            continue
+        if other == name:
+            raise ValueError(f"cross_fit: set '{name}' is its own partner; a set must be calibrated on another "
+                             "set's scores (use null where there is none)")
+        if other not in scores:
+            raise ValueError(f"cross_fit: partner '{other}' of '{name}' has no scores; have {sorted(scores)}")
+        out[name] = fit_calibrator(*scores[other], method)
+    return out
 
 
 def positive_share(probs, threshold: float = 0.5) -> float:

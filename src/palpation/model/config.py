@@ -44,7 +44,7 @@ NormStats = StrEnum("NormStats", {m: m for m in ("sample", "full")})
 Rotation = StrEnum("Rotation", {m: m for m in ROTATION_MODES})
 Schedule = StrEnum("Schedule", {m: m for m in ("none", "step")})
 SelectMetric = StrEnum("SelectMetric", {m: m for m in ("fg_iou", "ap")})
-Calibration = StrEnum("Calibration", {m: m for m in ("none", "temperature", "platt")})
+Calibration = StrEnum("Calibration", {m: m for m in ("none", "temperature", "platt", "cross_real")})
 CHOICES = {"norm_stats": NormStats, "rotation": Rotation, "schedule": Schedule, "select_metric": SelectMetric,
            "calibration": Calibration}
 
@@ -72,7 +72,9 @@ class TrainConfig:
     displacement_scale: float = 0.0  # per-clip displacement factor U(1 - s, 1 + s) about the rest layout
     patience: int | None = None  # early stopping: epochs without a better validation score; None = off
     select_metric: str = "fg_iou"  # validation score for checkpointing: fg_iou (at threshold) | ap
-    calibration: str = "none"  # post-hoc, fitted on the validation split: none | temperature | platt
+    # post-hoc: none | temperature | platt (on the validation split) | cross_real (Platt on the same models' scores on
+    # the other real test set scored with them, also_test; never the run's own test set)
+    calibration: str = "none"
     threshold: float = 0.5
     device: str = "cpu"
 

@@ -102,6 +102,10 @@ def run_job(job: TrainJob, out_dir: str | Path, params: dict | None = None, trac
     """Train, score and write outputs; returns the metrics dict also saved as metrics.json.
 
     `progress`: tqdm bars over the training batches and the test scoring."""
+    if job.train.calibration == "cross_real":
+        raise ValueError(f"{job.config_name}: calibration=cross_real fits on the same models' scores on another real "
+                         "set; train with seeds=[...] and also_test=[<config>:<set>] (e.g. A-to-B with "
+                         "also_test=[A-to-C:meat]), or use calibration=platt")
     d = load_job_data(job)
     ctx = (tracking.start_run("train", params or asdict(job), f"{job.config_name}/L{job.clip_len}",
                               _run_tags(job, tags), seed=job.seed) if track else nullcontext())
@@ -135,6 +139,7 @@ def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: 
     if len(set(keys)) != len(jobs) or len(jobs) != len(seeds) * len(outputs):
         raise ValueError(f"jobs trained together need every seed {seeds} once with every (test set, calibration) "
                          f"{outputs}")
+    partner = {j.config_name: cross_real_partner(j, tests) for j in jobs if j.train.calibration == "cross_real"}
     d = load_job_data(first)
     results = fit_seeds(d.train, d.val, d.rest, d.topo, first.model, first.train, seeds, progress=progress)
     joint = results[0].train_seconds
@@ -162,15 +167,31 @@ def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: 
         with ctx:
             if track:
                 tracking.log_metric_history(result.steps)
+            fit_on = None
+            if job.config_name in partner:  # the same seed's models' raw scores on the other real set
+                fit_on = (*scored[(partner[job.config_name], job.seed)][:2], partner[job.config_name])
             out.append(finish_job(job, result, replace(d, test=test_sets[job.config_name]), out_dir, track,
-                                  progress, {"trained_together": together}, scored[(job.config_name, job.seed)]))
+                                  progress, {"trained_together": together}, scored[(job.config_name, job.seed)],
+                                  fit_on))
     return out
 
 
+def cross_real_partner(job: TrainJob, tests: list[tuple[str, str]]) -> str:
+    """The configuration whose test scores calibrate `job` under calibration=cross_real: the one other real test set
+    (not Sim, not the job's own) among those scored by the same models."""
+    others = [name for name, test_on in tests if test_on not in ("sim", job.test_on)]
+    if len(others) != 1:
+        raise ValueError(f"{job.config_name}: calibration=cross_real needs exactly one other real test set scored by "
+                         f"the same models (also_test=[<config>:<set>]), got {others or 'none'} from {tests}")
+    return others[0]
+
+
 def finish_job(job: TrainJob, result: FitResult, d: JobData, out_dir: str | Path, track: bool,
-               progress: bool = False, extra: dict | None = None, scored: tuple | None = None) -> dict:
+               progress: bool = False, extra: dict | None = None, scored: tuple | None = None,
+               fit_on: tuple | None = None) -> dict:
     """Score the test set with a fitted model (unless `scored`: its probs, labels and seconds), write the
-    outputs, log them to the active run."""
+    outputs, log them to the active run. `fit_on` (probs, labels, config name): the other real set's scores
+    that calibration=cross_real is fitted on."""
     out_dir = Path(out_dir)
     rest, topo, val, test = d.rest, d.topo, d.val, d.test
     if scored is None:
@@ -179,17 +200,23 @@ def finish_job(job: TrainJob, result: FitResult, d: JobData, out_dir: str | Path
                                 device=job.train.device, progress=progress)
         scored = (probs, labels, time.perf_counter() - t0)
     probs, labels, test_seconds = scored
-    calibration = {}
-    if job.train.calibration != "none":  # fitted on the training domain's val split, never on test
+    calibration, cal, fitted_on = {}, None, f"{job.train_on} val"
+    if job.train.calibration == "cross_real":  # on the other real set's scores, never on this test set
+        if fit_on is None:
+            raise ValueError(f"{job.config_name}: calibration=cross_real needs the other real set's scores; train "
+                             "with seeds=[...] and also_test=[<config>:<set>]")
+        cal, fitted_on = fit_calibrator(fit_on[0], fit_on[1], "platt"), fit_on[2]
+        calibration["calibration_fitted_on"] = fitted_on
+    elif job.train.calibration != "none":  # fitted on the training domain's val split, never on test
         val_probs, val_labels = predict(result.model, val, result.stats, rest, topo, job.train.batch_size,
                                         job.train.val_batches, job.train.device)
         cal = fit_calibrator(val_probs, val_labels, job.train.calibration)
+    if cal is not None:
         raw = probs
         probs = cal.apply(raw)
-        calibration = {"calibration": cal.to_dict(),
-                       "test_raw": marker_metrics(raw, labels, job.train.threshold),
-                       "ece_raw": ece(raw, labels), "pos_share_05_raw": positive_share(raw)}
-        log.info("calibration %s on %d val scores: scale %.4f shift %.4f", cal.method, cal.n_fit,
+        calibration.update({"calibration": cal.to_dict(), "test_raw": marker_metrics(raw, labels, job.train.threshold),
+                            "ece_raw": ece(raw, labels), "pos_share_05_raw": positive_share(raw)})
+        log.info("calibration %s on %d scores (%s): scale %.4f shift %.4f", cal.method, cal.n_fit, fitted_on,
                  cal.scale, cal.shift)
     test_metrics = marker_metrics(probs, labels, job.train.threshold)
     metrics = {

@@ -126,6 +126,9 @@ def table4_maps_markdown(df: pd.DataFrame, profile: str, notes: list[str] | None
 RECIPE_ABLATION_COLUMNS = ("config", "recipe", "switch_off", "seeds", "auroc_mean", "auroc_std", "ap_mean", "ap_std",
                            "pos_share_05", "ece", "d_bar_mm")
 UNCERTAINTY_COLUMNS = ("config", "coverage", "precision", "recall")
+CROSSFIT_COLUMNS = ("config", "recipe", "switch_off", "calibration", "fitted_on", "seeds", "ece", "ece_std",
+                    "pos_share_05", "brier", "ap", "d_bar_mm", "map_recall", "map_pred_px", "map_threshold_from",
+                    "d_bar_05_mm", "map_recall_05", "d_bar_05_seeds")
 
 
 def recipe_ablation(rows: list[dict]) -> pd.DataFrame:
@@ -134,6 +137,11 @@ def recipe_ablation(rows: list[dict]) -> pd.DataFrame:
 
 def uncertainty_table(rows: list[dict]) -> pd.DataFrame:
     return pd.DataFrame([{k: r[k] for k in UNCERTAINTY_COLUMNS} for r in rows], columns=list(UNCERTAINTY_COLUMNS))
+
+
+def crossfit_table(rows: list[dict]) -> pd.DataFrame:
+    """docs/results/recipe_calibration_crossfit.csv (palpation.apps.recipe_crossfit)."""
+    return pd.DataFrame([{k: r[k] for k in CROSSFIT_COLUMNS} for r in rows], columns=list(CROSSFIT_COLUMNS))
 
 
 def recipe_ablation_markdown(df: pd.DataFrame, profile: str, notes: list[str] | None = None) -> str:
