@@ -84,9 +84,11 @@ class LoopConfig:
     # through the wrong binding (dev seed 1, contact + camera at the true physics: the old grid's start ended its LM
     # chain at 0.90 px, the truth fits 0.24 px; docs/loop.md). 3 halvings end at 2.5 px / 0.6 deg, the finish's own
     # finite-difference unit (loop.polish: 2 % of the width), below which its Jacobian sees the binding's kinks.
-    # false / 0: the principal point only, at the current rotation
-    camera_grid_rotation: bool = True
-    camera_grid_refine: int = 3
+    # Opt-in (false / 0: the principal point only, at the current rotation) until the 60-run GPU self-test measures
+    # it: on the reduced dev-seed loop it fixed one strong contact + camera run and lost the other to a wrong set
+    # (the grid runs at the search's physics, where k_s / E trade against f; docs/loop.md). The GPU script turns it on
+    camera_grid_rotation: bool = False
+    camera_grid_refine: int = 0
     # a set's search also starts from the end point of every subset of it tried earlier in the round (the null
     # try's: the empty set), so a larger set fits at least as well as what it contains (loop.refit.subset_starts)
     nested_starts: bool = True
