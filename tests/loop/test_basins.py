@@ -136,3 +136,38 @@ def test_the_old_grid_is_kept_with_the_rotation_axis_off():
     calls.clear()
     camera_starts([p], counting, {"toy": None}, nominal_steps({}), rotation=True, refine=3)
     assert calls == [2 * (2 + 49 * 7), *[2 * (2 + 27)] * 3]
+
+
+@pytest.mark.parametrize("grid", [False, True])
+def test_the_final_refit_leaves_a_wrong_rotation_basin_only_with_the_converged_grid(grid):
+    """loop.camera_grid_converged: the final refit of a set with the camera also starts from the rotation grid
+    at the final twin's physics; without it the LM chains stay in the wrong basin they start in."""
+    from palpation.loop.refit import converge
+    rng = np.random.default_rng(2)
+    truth = initial_params(TRUTH_ROT)
+    targets = [Target(State(n, "press", 2.0), toy_rot(State(n, "press"), truth) + rng.normal(0, 0.05, REST.shape),
+                      n != "h") for n in AMP]
+    p = Problem("toy", "k", targets, initial_params({}), list(CAM), candidates=[])
+    p.markers = np.stack([toy_rot(t.state, p.params) for t in targets])
+    log = converge([p], simulate_rot, None, 6, 2.0, camera_grid=grid)
+    err = abs(p.params["cam_rotation_deg"] - TRUTH_ROT["cam_rotation_deg"])
+    if grid:
+        assert err < 0.5 and log["toy"]["after"]["fit"] < 0.2, p.params
+    else:
+        assert err > 3.0 and log["toy"]["after"]["fit"] > 1.0, p.params
+
+
+@pytest.mark.parametrize("on", [False, True])
+def test_a_null_try_with_the_camera_gets_the_rotation_grid_only_when_asked(on):
+    """refit.finish: the problems named in `converged_basins` (the round's null tries) get the rotation grid's
+    start with loop.camera_grid_converged, whatever the grid of the tries that add the camera."""
+    rng = np.random.default_rng(3)
+    truth = initial_params(TRUTH_ROT)
+    targets = [Target(State(n, "press", 2.0), toy_rot(State(n, "press"), truth) + rng.normal(0, 0.05, REST.shape),
+                      n != "h") for n in AMP]
+    p = Problem("toy~null", "k", targets, initial_params({}), list(CAM), candidates=[])
+    cfg = LoopConfig(polish_iters=6, polish_starts=1, final_refit_starts=1, camera_grid_converged=on).validate()
+    fits = {p.name: {"ranked": [dict(p.params)]}}
+    finish(cfg, [p], fits, simulate_rot, (), (), {p.name})
+    assert fits[p.name]["polish"]["chains"] == (2 if on else 1)
+    assert (abs(p.params["cam_rotation_deg"] - TRUTH_ROT["cam_rotation_deg"]) < 0.5) == on, p.params

@@ -294,7 +294,7 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
             # every try (null too) at its local optimum; a try that adds the camera also from its best other basin
             finish(cfg, [*trying, *extra], fits, simulate,
                    {p.name for p in trying if "camera" in queue[p.name][attempt]["effects"]},
-                   {q.name for q in extra} if cfg.null_converge else ())
+                   {q.name for q in extra} if cfg.null_converge else (), {q.name for q in extra})
             diverged = evaluate([*trying, *extra], simulate, strict=False)
             for q in extra:  # a diverged null try leaves the previous twin as the only reference
                 nulls[q.name[:-len(NULL)]] = None if q.name in diverged else (q.summary(), q.markers, fits[q.name])

@@ -74,7 +74,11 @@ def subset_starts(ends, effects) -> list[dict]:
     return [dict(params) for done, params in ends if done < new]
 
 
-def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_crit: float) -> dict[str, dict]:
+CONVERGED_REFINE = 3  # the rotation grid's halvings at converged physics (loop.camera_grid_converged; loop.basins)
+
+
+def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_crit: float,
+             camera_grid: bool = False, steps: Mapping[str, float] | None = None) -> dict[str, dict]:
     """The final refit: Levenberg-Marquardt (loop.polish) on every problem's searched parameters from its
     current twin and p.starts (the last kept try's other distinct best trials), all problems in one batch
     per step. The end point is kept only if the fitted MAE falls and the held-out change is not
@@ -85,7 +89,13 @@ def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_cri
     log_ = {p.name: {"before": p.summary(), "kept": 0, "converged": True} for p in problems}
     going = [p for p in problems if p.searched]
     old = {p.name: (dict(p.params), p.markers) for p in going}
-    res = polish(going, {p.name: [dict(p.params), *p.starts] for p in going}, simulate,
+    starts = {p.name: [dict(p.params), *p.starts] for p in going}
+    if camera_grid:  # a set with the camera also starts from its best basin at the final physics (loop.basins)
+        grid = camera_starts(going, simulate, {p.name: {**(limits or {}), **p.trust} for p in going},
+                             nominal_steps(steps or {}), True, CONVERGED_REFINE)
+        for name, s in grid.items():
+            starts[name].append(s)
+    res = polish(going, starts, simulate,
                  {p.name: {**(limits or {}), **p.trust} for p in going}, iters)
     diverged = evaluate(going, simulate, strict=False)
     for p in going:
@@ -109,17 +119,22 @@ def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_cri
     return log_
 
 
-def finish(cfg: LoopConfig, problems: list, fits: dict[str, dict], simulate, basins=(), converge=()) -> None:
+def finish(cfg: LoopConfig, problems: list, fits: dict[str, dict], simulate, basins=(), converge=(),
+           converged_basins=()) -> None:
     """The local least-squares finish of each problem's search (loop.polish), from its best distinct trials
     (and, for the problems named in `basins`, the camera's best other basin: loop.basins); fits[name] gains
     `polish` (fitted MAE before/after), `params_final` and `starts` (the next-best distinct trials the final
     refit also starts from) in place of the search's ranked trials. The problems named in `converge` (the
-    round's null tries, loop.null_converge) go on to final_refit_iters steps in all while still descending."""
+    round's null tries, loop.null_converge) go on to final_refit_iters steps in all while still descending; those
+    named in `converged_basins` (the null tries, loop.camera_grid_converged) get the rotation grid's start."""
     limits = {p.name: {**cfg.search.bounds, **p.trust} for p in problems}
     starts = {p.name: distinct_starts(fits[p.name].pop("ranked"), p.searched, limits[p.name],
                                       max(cfg.polish_starts, cfg.final_refit_starts)) for p in problems}
     grid = camera_starts([p for p in problems if p.name in basins], simulate, limits, nominal_steps(cfg.steps),
                          cfg.camera_grid_rotation, cfg.camera_grid_refine) if cfg.camera_basins else {}
+    if cfg.camera_grid_converged:  # the null tries' (converged physics; loop.camera_grid_converged)
+        grid.update(camera_starts([p for p in problems if p.name in converged_basins and p.name not in grid], simulate,
+                                  limits, nominal_steps(cfg.steps), True, CONVERGED_REFINE))
     for name, s in grid.items():  # the camera's best other basin as one more start (loop.basins)
         starts[name] = [*starts[name][:cfg.polish_starts], s, *starts[name][cfg.polish_starts:]]
     if cfg.polish_iters > 0:
