@@ -4,22 +4,33 @@ import numpy as np
 import pytest
 import warp as wp
 
+from palpation.twin import resident
+from palpation.twin.agreement import LAYERED, compare_devices
 from palpation.twin.config import TwinConfig
+from palpation.twin.mesh import shell_weights
 from palpation.twin.resident import ResidentLayout, color_tets
 from palpation.twin.resident_sync import chunk_table, pack_corners
 from palpation.twin.simulator import BatchedTwin
 
 
 DEVICES = ["cpu"] + (["cuda:0"] if wp.is_cuda_available() else [])
+SHELL_M = 1.5e-3  # the loop's layered skin (loop.shell_thickness_mm)
+# per env: a stiffer and a softer shell, more and less damping than the config's alpha (0.02)
+LAYERED_ENVS = {"shell_ratio": np.array([3.0, 0.5]), "alpha": np.array([0.2, 0.05])}
 
 
-def _press(mesh, kernel, frames=6, layout=None, block_dim=1, device="cpu", variant="tiles", coloring="mesh_order"):
-    """Two envs pressing 2 mm into the vessel (one without it): positions after each frame."""
+def _press(mesh, kernel, frames=6, layout=None, block_dim=1, device="cpu", variant="tiles", coloring="mesh_order",
+           layered=False):
+    """Two envs pressing 2 mm into the vessel (one without it): positions after each frame.
+    layered: the residual loop's layered elastic kernel with LAYERED_ENVS."""
     cfg = TwinConfig()
     cfg.integrator.kernel, cfg.integrator.block_dim = kernel, block_dim
     cfg.integrator.resident_variant, cfg.integrator.resident_coloring = variant, coloring
     cfg.integrator.force_sum = "scatter" if device == "cpu" else "gather"  # mesh-order sums
-    sim = BatchedTwin(mesh, 2, cfg, {"vessel": np.array([1.0, 0.0])}, device=device)
+    if layered:
+        cfg.material.shell_thickness, cfg.damping.per_env = SHELL_M, True
+    sim = BatchedTwin(mesh, 2, cfg, {"vessel": np.array([1.0, 0.0]), **(LAYERED_ENVS if layered else {})},
+                      device=device)
     if layout is not None:
         sim.resident = layout(sim)
     top = cfg.scene.phantom_top_z
@@ -76,11 +87,21 @@ def test_colored_resident_agrees_with_streamed(mesh, device, block_dim):
     assert not sim.failed().any()
 
 
-def test_resident_rejects_layered_config():
+def test_kernel_config_is_checked():
     cfg = TwinConfig()
-    cfg.integrator.kernel, cfg.damping.per_env = "resident", True
-    with pytest.raises(ValueError, match="resident"):
+    cfg.integrator.kernel = "fast"
+    with pytest.raises(ValueError, match="twin.integrator.kernel='fast'"):
         cfg.validate()
+    cfg.integrator.kernel, cfg.damping.per_env = "resident", True
+    cfg.validate()  # compact (the default variant) runs the layered kernel
+    cfg.integrator.resident_variant = "tiles"
+    with pytest.raises(ValueError, match="resident_variant in"):
+        cfg.validate()
+    cfg.integrator.resident_variant, cfg.contact.rule = "compact", "centroid"
+    with pytest.raises(ValueError, match="contact.rule='sdf'"):
+        cfg.validate()
+    cfg.integrator.kernel = "auto"  # auto falls back to the streamed kernels instead
+    cfg.validate()
 
 
 @pytest.fixture
@@ -151,3 +172,74 @@ def test_resident_variant_names_are_checked():
     cfg.integrator.resident_variant, cfg.integrator.resident_coloring = "packed", "dsatur"
     with pytest.raises(ValueError, match="resident_coloring"):
         cfg.validate()
+
+
+def _need(mesh):
+    return ~mesh.fixed | np.isin(np.arange(mesh.n_nodes), mesh.surface_nodes)
+
+
+def test_layered_mesh_order_resident_equals_streamed_bit_for_bit(mesh):
+    """The layered per-tet arithmetic is the streamed kernel's own (layered_tet_forces): one lane in mesh order
+    sums in the streamed scatter's order, so every bit agrees."""
+    def mesh_order(sim):
+        return ResidentLayout.for_mesh(mesh, _need(mesh), sim.device, colored=False, variant="compact",
+                                       tet_shell=shell_weights(mesh.nodes, mesh.tets, SHELL_M))
+
+    ref, sim_ref = _press(mesh, "streamed", layered=True)
+    got, sim = _press(mesh, "resident", layout=mesh_order, block_dim=64, variant="compact", layered=True)
+    plain, _ = _press(mesh, "streamed")
+    assert np.abs(ref - plain).max() > 1e-6  # the shell and the per-env alpha act
+    assert sim.contact_flags()[0] and not sim.contact_flags()[1]
+    np.testing.assert_array_equal(got, ref)
+    np.testing.assert_array_equal(sim.velocities_world(), sim_ref.velocities_world())
+    np.testing.assert_array_equal(sim.contact_forces(), sim_ref.contact_forces())
+
+
+@pytest.mark.parametrize("variant", ["compact", "packed"])
+def test_layered_colored_resident_agrees_with_streamed(mesh, cpu_lanes, variant):
+    """Colour order, 16 cooperative lanes: the layered sums differ from the streamed ones by rounding only."""
+    ref, _ = _press(mesh, "streamed", layered=True)
+    got, sim = _press(mesh, "resident", block_dim=cpu_lanes, variant=variant, layered=True)
+    moved = np.abs(ref[-1] - ref[0]).max()
+    assert moved > 5e-4 and sim.resident.layered
+    assert np.abs(got - ref).max() < 1e-4 * moved and sim.contact_flags()[0]
+
+
+def test_layered_agreement_over_a_short_slide(mesh, cpu_lanes):
+    """python -m palpation.twin.agreement --layered on the CPU: the five trajectories' first 12 frames, phantom
+    contact on, markers within float rounding (a missing shell would move them by pixels)."""
+    res = compare_devices(mesh, ["cpu"], 12, ("streamed", "resident"), "compact", cpu_lanes, LAYERED)
+    assert res["layered"] and res["resident_variant"] == "compact:mesh_order"
+    assert res["max_px"] < 1e-3, res["per_trajectory"]
+    assert all(v["contact_agreement"] == 1.0 for v in res["per_trajectory"].values())
+
+
+@pytest.mark.parametrize("layered", [False, True])
+def test_auto_kernel_is_streamed_on_the_cpu(mesh, layered):
+    ref, sim_ref = _press(mesh, "streamed", frames=3, layered=layered)
+    got, sim = _press(mesh, "auto", frames=3, layered=layered)
+    assert sim.resident is None
+    np.testing.assert_array_equal(got, ref)
+    np.testing.assert_array_equal(sim.contact_forces(), sim_ref.contact_forces())
+
+
+def test_auto_kernel_choice_on_cuda(mesh, monkeypatch):
+    """What auto picks on a CUDA device (a stand-in with an H100's 227 KB of shared memory a block)."""
+    gpu = type("Gpu", (), {"is_cuda": True, "max_shared_memory_per_block": 232_448})()
+    monkeypatch.setattr(resident.wp, "get_device", lambda device=None: gpu)
+    need = _need(mesh)
+    cfg = TwinConfig()
+    cfg.integrator.kernel = "auto"
+    assert resident.runs_resident(cfg, need, "cuda:0")
+    cfg.damping.per_env = True  # layered: compact has it
+    assert resident.runs_resident(cfg, need, "cuda:0")
+    cfg.integrator.resident_variant = "onesync"  # no layered kernel: streamed
+    assert not resident.runs_resident(cfg, need, "cuda:0")
+    cfg.integrator.resident_variant, cfg.contact.rule = "compact", "centroid"
+    assert not resident.runs_resident(cfg, need, "cuda:0")
+    cfg.contact.rule = "sdf"
+    gpu.max_shared_memory_per_block = resident.resident_shared_bytes("compact", mesh.n_nodes, int(need.sum()))
+    assert not resident.runs_resident(cfg, need, "cuda:0")  # no room for the static shared memory
+    gpu.is_cuda = False
+    cfg.integrator.kernel = "resident"  # an explicit choice stands (the CPU path of the tests above)
+    assert resident.runs_resident(cfg, need, "cpu")

@@ -20,6 +20,8 @@ from palpation import paper
 
 RESIDENT_VARIANTS = ("tiles", "onesync", "packed", "atomic", "compact", "compact_atomic")  # twin/resident_sync.py
 RESIDENT_COLORINGS = ("mesh_order", "largest_first")  # resident.color_tets
+LAYERED_VARIANTS = ("packed", "atomic", "compact", "compact_atomic")  # resident variants with the layered kernel
+KERNELS = ("streamed", "resident", "auto")  # twin.integrator.kernel
 REF_LENGTH_SCALE = paper.LENGTH_SCALE  # reference sim length / physical length (SPEC §1.2)
 
 
@@ -72,7 +74,9 @@ class IntegratorConfig:
     force_sum: str = "auto"
     # "streamed": one launch per pass per substep, state in global memory (the reference path, and
     # the CPU path); "resident": one launch per frame, each env's x, v, f in one block's shared
-    # memory (twin/resident.py, issue 17; SDF contact and the plain elastic kernel only)
+    # memory (twin/resident.py, issue 17; SDF contact; the layered elastic kernel in LAYERED_VARIANTS);
+    # "auto": resident on CUDA where the config and the block's shared memory allow it, else streamed
+    # (always streamed on the CPU: the same bits as "streamed"; resident.runs_resident)
     kernel: str = "streamed"
     # threads per env block of the resident kernel (<= 512: 106 registers a thread; compact <= 384, two blocks an SM).
     # 320 with compact: the fastest point of the H200 variant run, 12.63 s for 500 reference envs (docs/twin.md)
@@ -224,11 +228,14 @@ class TwinConfig:
         if self.integrator.force_sum == "gather" and self.contact.rule == "centroid":
             raise ValueError("twin.integrator.force_sum='gather' needs contact.rule='sdf' (the centroid "
                              "rule reads the scattered forces); use 'scatter' or 'auto'")
-        if self.integrator.kernel not in ("streamed", "resident"):
-            raise ValueError(f"twin.integrator.kernel={self.integrator.kernel!r}: use 'streamed' or 'resident'")
-        if self.integrator.kernel == "resident" and (self.contact.rule != "sdf" or self.layered):
-            raise ValueError("twin.integrator.kernel='resident' needs contact.rule='sdf' and the plain elastic "
-                             "kernel (material.shell_thickness=0, damping.per_env=false); use 'streamed'")
+        if self.integrator.kernel not in KERNELS:
+            raise ValueError(f"twin.integrator.kernel={self.integrator.kernel!r}: use one of {KERNELS}")
+        if self.integrator.kernel == "resident" and self.contact.rule != "sdf":
+            raise ValueError("twin.integrator.kernel='resident' needs contact.rule='sdf'; use 'streamed' or 'auto'")
+        if (self.integrator.kernel == "resident" and self.layered
+                and self.integrator.resident_variant not in LAYERED_VARIANTS):
+            raise ValueError(f"twin.integrator.kernel='resident' with the layered elastic kernel needs "
+                             f"resident_variant in {LAYERED_VARIANTS}, got {self.integrator.resident_variant!r}")
         if not 1 <= self.integrator.block_dim <= 512:  # 106 registers a thread on sm_90: 512 fit an SM
             raise ValueError(f"twin.integrator.block_dim={self.integrator.block_dim}: use 1..512 threads")
         if self.integrator.resident_variant not in RESIDENT_VARIANTS:

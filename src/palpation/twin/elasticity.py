@@ -58,6 +58,16 @@ def tet_forces(x0: wp.vec3, x1: wp.vec3, x2: wp.vec3, x3: wp.vec3, v0: wp.vec3, 
     return g0, g1, g2
 
 
+@wp.func
+def layered_tet_forces(x0: wp.vec3, x1: wp.vec3, x2: wp.vec3, x3: wp.vec3, v0: wp.vec3, v1: wp.vec3,
+                       v2: wp.vec3, v3: wp.vec3, B: wp.mat33, mu: float, lam: float, shell_ratio: float,
+                       shell: float, alpha: float, beta: float):
+    """`tet_forces` of a layered tet: moduli scaled by 1 + (ratio - 1) * its shell fraction (mu and
+    lambda alike, so nu is kept). Shared by the streamed and the frame-resident layered kernels."""
+    scale = 1.0 + (shell_ratio - 1.0) * shell
+    return tet_forces(x0, x1, x2, x3, v0, v1, v2, v3, B, scale * mu, scale * lam, alpha, beta)
+
+
 @wp.kernel
 def eval_elastic_forces(
     x: wp.array[wp.vec3],
@@ -109,9 +119,9 @@ def eval_elastic_forces_layered(
 ):
     """`eval_elastic_forces` with a stiffer outer shell and a per-env damping alpha (residual loop).
 
-    A tet's moduli are scaled by 1 + (ratio - 1) * shell fraction (mu and lambda alike, so nu is
-    kept). At ratio 1 and alpha equal to the config's, the result equals the reference kernel's bit
-    for bit (the scale is exactly 1.0).
+    A tet's moduli are scaled by 1 + (ratio - 1) * shell fraction (`layered_tet_forces`). At ratio 1
+    and alpha equal to the config's, the result equals the reference kernel's bit for bit (the scale
+    is exactly 1.0).
     """
     tid = wp.tid()
     env = tid // n_tets
@@ -121,9 +131,9 @@ def eval_elastic_forces_layered(
     i1 = tets[t, 1] + off
     i2 = tets[t, 2] + off
     i3 = tets[t, 3] + off
-    scale = 1.0 + (env_shell_ratio[env] - 1.0) * tet_shell[t]
-    g0, g1, g2 = tet_forces(x[i0], x[i1], x[i2], x[i3], v[i0], v[i1], v[i2], v[i3], dm_inv[t],
-                            scale * env_mu[env], scale * env_lam[env], env_alpha[env], beta)
+    g0, g1, g2 = layered_tet_forces(x[i0], x[i1], x[i2], x[i3], v[i0], v[i1], v[i2], v[i3], dm_inv[t],
+                                    env_mu[env], env_lam[env], env_shell_ratio[env], tet_shell[t],
+                                    env_alpha[env], beta)
     deposit_forces(f, fs, t, env * n_slots, i0, i1, i2, i3, g0, g1, g2, gather)
 
 

@@ -19,11 +19,12 @@ import functools
 import numpy as np
 import warp as wp
 
+from palpation.twin.config import LAYERED_VARIANTS
 from palpation.twin.config import RESIDENT_COLORINGS as COLORINGS
 from palpation.twin.config import RESIDENT_VARIANTS as VARIANTS
 from palpation.twin.contact import ContactParams, surface_contact_force
 from palpation.twin.elasticity import rest_shape, tet_forces
-from palpation.twin.resident_sync import chunk_table, onesync_kernel, pack_corners, packed_kernel
+from palpation.twin.resident_sync import NEED_BIT, chunk_table, onesync_kernel, pack_corners, packed_kernel
 
 VEC3 = 12
 
@@ -180,9 +181,12 @@ class ResidentLayout:
 
     def __init__(self, tets: np.ndarray, dm_inv: np.ndarray, needs_force: np.ndarray, device,
                  colored: bool = True, cap: int | None = None, variant: str = "tiles",
-                 coloring: str = "mesh_order"):
+                 coloring: str = "mesh_order", shell: np.ndarray | None = None):
         if variant not in VARIANTS:
             raise ValueError(f"twin.integrator.resident_variant={variant!r}: use one of {VARIANTS}")
+        if shell is not None and variant not in LAYERED_VARIANTS:
+            raise ValueError(f"twin.integrator.resident_variant={variant!r} has no layered elastic kernel: use "
+                             f"one of {LAYERED_VARIANTS} or twin.integrator.kernel='streamed'")
         # colored=False: one "colour" in mesh order, the streamed path's sum order; valid with one
         # lane per block only (the CPU default), where it reproduces the streamed kernels bit for bit.
         order, start = (color_tets(tets, needs_force, cap, coloring) if colored
@@ -218,15 +222,23 @@ class ResidentLayout:
             rows = np.ascontiguousarray(dm_inv[order].reshape(len(order), 9).T, dtype=np.float32)
             self.dm_rows = wp.array(rows, dtype=float, device=device)
             bounds = (cap or 512, 2) if n_force else (512, 1)  # compact: registers for two blocks an SM
-            self.kernel = packed_kernel(n_nodes, atomic, n_force, bounds)
+            # layered (residual loop): each tet's shell fraction, in the chunks' tet order like Dm^-1
+            self.shell = wp.array(np.zeros(1) if shell is None else np.asarray(shell)[order], dtype=float,
+                                  device=device)
+            self.layered = shell is not None
+            self.kernel = packed_kernel(n_nodes, atomic, n_force, bounds, self.layered)
 
     @classmethod
     def for_mesh(cls, mesh, needs_force: np.ndarray, device, colored: bool = True, cap: int | None = None,
-                 variant: str = "tiles", coloring: str = "mesh_order") -> "ResidentLayout":
+                 variant: str = "tiles", coloring: str = "mesh_order",
+                 tet_shell: np.ndarray | None = None) -> "ResidentLayout":
         """The layout of the tets with a node that needs its force (the streamed kernels' moving tets);
-        `cap` = the block size: colours of at most one chunk each."""
-        tets = mesh.tets[needs_force[mesh.tets].any(axis=1)]
-        return cls(tets, rest_shape(mesh.nodes, tets)[0], needs_force, device, colored, cap, variant, coloring)
+        `cap` = the block size: colours of at most one chunk each; `tet_shell` (per mesh tet) selects
+        the layered elastic kernel."""
+        moving = needs_force[mesh.tets].any(axis=1)
+        tets = mesh.tets[moving]
+        return cls(tets, rest_shape(mesh.nodes, tets)[0], needs_force, device, colored, cap, variant, coloring,
+                   None if tet_shell is None else np.asarray(tet_shell)[moving])
 
     def constants(self, lanes: int) -> list:
         """The kernel's mesh-constant arguments (before inv_mass) for blocks of `lanes` threads."""
@@ -237,9 +249,13 @@ class ResidentLayout:
                              f"the launch {lanes}; build the twin after setting wp.config.enable_cpu_blocks")
         return [self.corners, self.dm_rows, self.chunk_start, self.chunk_end, self.n_chunks]
 
-    def node_order(self) -> list:
-        """The packed kernels' last argument: their node numbering (identity unless "compact*")."""
-        return [] if self.variant in ("tiles", "onesync") else [self.local_to_global]
+    def extra_args(self, sim) -> list:
+        """The packed kernels' last arguments: their node numbering (identity unless "compact*") and
+        the layered kernel's shell fractions, shell ratios and alphas (read only when layered)."""
+        if self.variant in ("tiles", "onesync"):
+            return []
+        per_env = [sim.env_shell_ratio, sim.env_alpha] if self.layered else [self.shell, self.shell]
+        return [self.local_to_global, self.shell, *per_env]
 
 
 def block_lanes(device, block_dim: int) -> int:
@@ -254,4 +270,28 @@ def launch_resident(sim, block_dim: int) -> None:
     wp.launch_tiled(lay.kernel, dim=[sim.n_envs], block_dim=block_dim, device=sim.device,
                     inputs=[*consts, sim.inv_mass, sim.fixed, sim.on_surface, sim.env_mu, sim.env_lam,
                             d.alpha, d.beta, sim.dt, sim.substeps, sim.contact, sim.v_ctl],
-                    outputs=[sim.x, sim.v, sim.f_c, sim.contact_flag, *lay.node_order()])
+                    outputs=[sim.x, sim.v, sim.f_c, sim.contact_flag, *lay.extra_args(sim)])
+
+
+def resident_shared_bytes(variant: str, n_nodes: int, n_force: int) -> int:
+    """Shared memory of one env block: x, v over all nodes, f over the force nodes ("compact*") or all."""
+    return (2 * n_nodes + (n_force if variant.startswith("compact") else n_nodes)) * VEC3
+
+
+def runs_resident(cfg, needs_force: np.ndarray, device) -> bool:
+    """Whether `cfg.integrator.kernel` selects the frame-resident kernel on `device`.
+
+    "auto": on CUDA where the config allows it (SDF contact; the layered elastic kernel only in the packed
+    variants) and an env's tiles fit one block's shared memory (plus 4 KB of static shared memory), else the
+    streamed kernels; always the streamed ones on the CPU, so every CPU result keeps its bits."""
+    ig = cfg.integrator
+    if ig.kernel != "auto":
+        return ig.kernel == "resident"
+    dev = wp.get_device(device)
+    if not dev.is_cuda or cfg.contact.rule != "sdf" or (cfg.layered and ig.resident_variant not in LAYERED_VARIANTS):
+        return False
+    n = len(needs_force)
+    if ig.resident_variant not in ("tiles", "onesync") and n >= NEED_BIT:  # 15-bit packed corner indices
+        return False
+    return resident_shared_bytes(ig.resident_variant, n, int(needs_force.sum())) + 4096 <= \
+        dev.max_shared_memory_per_block

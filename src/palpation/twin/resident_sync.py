@@ -22,6 +22,10 @@ write shared tiles directly, so these kernels keep exactly those barriers:
   force nodes (reference: x, v, f = 111,200 B instead of 123,696): two blocks of <= 384 threads fit
   an H100/H200 SM (launch bounds cap the registers), and one block's barriers no longer idle it.
   The same bits as "packed". "compact_atomic": "compact" with the atomics of "atomic".
+
+The packed kernels (packed, atomic, compact, compact_atomic) also run the layered elastic kernel of the
+residual loop (`layered`: per-tet shell fraction, per-env shell ratio and alpha) through the streamed
+layered kernel's own per-tet function, `layered_tet_forces`.
 """
 
 # no `from __future__ import annotations`: the tile annotations of the native helpers name closure
@@ -33,7 +37,7 @@ import numpy as np
 import warp as wp
 
 from palpation.twin.contact import ContactParams, surface_contact_force
-from palpation.twin.elasticity import tet_forces
+from palpation.twin.elasticity import layered_tet_forces, tet_forces
 
 INDEX_BITS = 15  # per corner: a node index below 2**15 and its need-force bit
 NEED_BIT = 1 << INDEX_BITS
@@ -200,12 +204,15 @@ def onesync_kernel(n_nodes: int):
 
 
 @functools.lru_cache(maxsize=None)
-def packed_kernel(n_nodes: int, atomic: bool, n_force: int = 0, bounds: tuple[int, int] = (512, 1)):
+def packed_kernel(n_nodes: int, atomic: bool, n_force: int = 0, bounds: tuple[int, int] = (512, 1),
+                  layered: bool = False):
     """Packed constants, next chunk prefetched; colour chunks + plain adds, or mesh order + atomics.
 
     n_force > 0 ("compact"): the nodes are renumbered force nodes first (`local_to_global`), so the
     force tile holds the n_force nodes that need a force only. `bounds` = CUDA launch bounds (threads,
-    blocks an SM): (block_dim, 2) caps the registers so that two blocks fit (65,536 / 2 / block_dim)."""
+    blocks an SM): (block_dim, 2) caps the registers so that two blocks fit (65,536 / 2 / block_dim).
+    layered: the streamed `eval_elastic_forces_layered`'s arithmetic (tet_shell in the chunks' tet order,
+    env_shell_ratio and env_alpha per env); otherwise those three arrays are not read."""
     compact = n_force > 0
     n_f = n_force if compact else n_nodes
     add_plain, add_atomic = tile_writers(n_f)[:2]
@@ -229,7 +236,8 @@ def packed_kernel(n_nodes: int, atomic: bool, n_force: int = 0, bounds: tuple[in
                      env_lam: wp.array[float], alpha: float, beta: float, dt: float, substeps: int,
                      p: ContactParams, v_ctl: wp.array[wp.vec3], x: wp.array[wp.vec3], v: wp.array[wp.vec3],
                      f_c: wp.array[wp.vec3], contact_flag: wp.array[wp.int32],
-                     local_to_global: wp.array[wp.int32]):
+                     local_to_global: wp.array[wp.int32], tet_shell: wp.array[float],
+                     env_shell_ratio: wp.array[float], env_alpha: wp.array[float]):
         env, lane = wp.tid()
         nb = wp.block_dim()
         off = env * n_nodes
@@ -249,12 +257,20 @@ def packed_kernel(n_nodes: int, atomic: bool, n_force: int = 0, bounds: tuple[in
         block_sync()
         mu = env_mu[env]
         lam = env_lam[env]
+        a = alpha
+        ratio = float(1.0)
+        if wp.static(layered):
+            a = env_alpha[env]
+            ratio = env_shell_ratio[env]
         for s in range(substeps):
             t = chunk_start[0] + lane
             ok = t < chunk_end[0]
             tc = wp.min(t, last)  # idle lanes load a valid tet and skip it
             q = corners[tc]
             B = load_dm(dm, tc)
+            w = float(0.0)
+            if wp.static(layered):
+                w = tet_shell[tc]
             for k in range(n_chunks):
                 # the next chunk's constants first (the sentinel after the last chunk is empty)
                 tn = chunk_start[k + 1] + lane
@@ -262,13 +278,20 @@ def packed_kernel(n_nodes: int, atomic: bool, n_force: int = 0, bounds: tuple[in
                 tn = wp.min(tn, last)
                 q_n = corners[tn]
                 B_n = load_dm(dm, tn)
+                w_n = float(0.0)
+                if wp.static(layered):
+                    w_n = tet_shell[tn]
                 if ok:
                     i0, h0 = corner(q, 0)
                     i1, h1 = corner(q, 1)
                     i2, h2 = corner(q, 2)
                     i3, h3 = corner(q, 3)
-                    g0, g1, g2 = tet_forces(xs[i0], xs[i1], xs[i2], xs[i3], vs[i0], vs[i1], vs[i2], vs[i3], B,
-                                            mu, lam, alpha, beta)
+                    if wp.static(layered):
+                        g0, g1, g2 = layered_tet_forces(xs[i0], xs[i1], xs[i2], xs[i3], vs[i0], vs[i1], vs[i2],
+                                                        vs[i3], B, mu, lam, ratio, w, a, beta)
+                    else:
+                        g0, g1, g2 = tet_forces(xs[i0], xs[i1], xs[i2], xs[i3], vs[i0], vs[i1], vs[i2], vs[i3], B,
+                                                mu, lam, alpha, beta)
                     g3 = -(g0 + g1 + g2)
                     if wp.static(atomic):
                         add_atomic(fs, i0, g0, h0)
@@ -284,6 +307,7 @@ def packed_kernel(n_nodes: int, atomic: bool, n_force: int = 0, bounds: tuple[in
                     block_sync()  # the next colour may share nodes with this one
                 q = q_n
                 B = B_n
+                w = w_n
                 ok = ok_n
             if wp.static(atomic):
                 block_sync()

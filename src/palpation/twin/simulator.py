@@ -22,7 +22,7 @@ from palpation.twin.integrate import (advance_frame, check_nodes, check_tets, in
                                       integrate_nodes, load_frame_poses, reset_velocities,
                                       set_control_velocity, snap_fixed_nodes)
 from palpation.twin.mesh import SensorMesh, build_vessel_points, morton_order, projected_node_area, shell_weights
-from palpation.twin.resident import ResidentLayout, launch_resident
+from palpation.twin.resident import ResidentLayout, launch_resident, runs_resident
 from palpation.twin.warp_runtime import resolve_device
 from palpation.twin.parameters import CONTACT_KEYS, ENV_KEYS, LAYERED_KEYS, by_env_key, per_env_keys
 
@@ -60,11 +60,11 @@ class BatchedTwin:
             run_index[perm] = np.arange(len(perm))
         slots, start = force_slots(mesh.tets[moving_ix], needs_force, N, run_index)  # sums in mesh order
         moving_ix = moving_ix[np.argsort(run_index)]
-        # the frame-resident kernel's layout (cfg.integrator.kernel, issue 17)
-        ig = cfg.integrator
+        # the frame-resident kernel's layout (cfg.integrator.kernel, issue 17); shell fractions per mesh tet
+        ig, shell = cfg.integrator, shell_weights(mesh.nodes, mesh.tets, cfg.material.shell_thickness)
         self.resident = (ResidentLayout.for_mesh(mesh, needs_force, dev, cap=ig.block_dim, variant=ig.resident_variant,
-                                                 coloring=ig.resident_coloring)
-                         if cfg.integrator.kernel == "resident" else None)
+                                                 coloring=ig.resident_coloring, tet_shell=shell if cfg.layered else None)
+                         if runs_resident(cfg, needs_force, dev) else None)
         self.tet_order = np.concatenate([moving_ix, np.flatnonzero(~moving)])
         self.n_force_tets = len(moving_ix)
         tets = mesh.tets[self.tet_order]
@@ -117,8 +117,7 @@ class BatchedTwin:
             # no sensor triangle lies farther from the tip than the rest radius plus 5 mm of travel
             self.reach = float(np.linalg.norm(mesh.nodes, axis=1).max()) + 0.005
         if cfg.layered:  # shell fraction per tet, stored once like Dm^-1
-            w = shell_weights(mesh.nodes, mesh.tets, cfg.material.shell_thickness)[self.tet_order]
-            self.tet_shell = wp.array(w.astype(np.float32), dtype=float, device=dev)
+            self.tet_shell = wp.array(shell[self.tet_order].astype(np.float32), dtype=float, device=dev)
             for key in LAYERED_KEYS:  # env_alpha, env_shell_ratio: read by the layered kernel
                 setattr(self, f"env_{key}", wp.zeros(n, dtype=float, device=dev))
         self.set_env_params(env_params or {})
