@@ -102,6 +102,9 @@ def test_kernel_config_is_checked():
         cfg.validate()
     cfg.integrator.kernel = "auto"  # auto falls back to the streamed kernels instead
     cfg.validate()
+    cfg.integrator.auto_min_envs = 0
+    with pytest.raises(ValueError, match="auto_min_envs"):
+        cfg.validate()
 
 
 @pytest.fixture
@@ -230,16 +233,18 @@ def test_auto_kernel_choice_on_cuda(mesh, monkeypatch):
     need = _need(mesh)
     cfg = TwinConfig()
     cfg.integrator.kernel = "auto"
-    assert resident.runs_resident(cfg, need, "cuda:0")
+    assert resident.runs_resident(cfg, need, "cuda:0", 1)
     cfg.damping.per_env = True  # layered: compact has it
-    assert resident.runs_resident(cfg, need, "cuda:0")
+    assert resident.runs_resident(cfg, need, "cuda:0", 1)
+    cfg.integrator.auto_min_envs = 64  # smaller batches stay streamed
+    assert not resident.runs_resident(cfg, need, "cuda:0", 63) and resident.runs_resident(cfg, need, "cuda:0", 64)
     cfg.integrator.resident_variant = "onesync"  # no layered kernel: streamed
-    assert not resident.runs_resident(cfg, need, "cuda:0")
+    assert not resident.runs_resident(cfg, need, "cuda:0", 64)
     cfg.integrator.resident_variant, cfg.contact.rule = "compact", "centroid"
-    assert not resident.runs_resident(cfg, need, "cuda:0")
+    assert not resident.runs_resident(cfg, need, "cuda:0", 64)
     cfg.contact.rule = "sdf"
     gpu.max_shared_memory_per_block = resident.resident_shared_bytes("compact", mesh.n_nodes, int(need.sum()))
-    assert not resident.runs_resident(cfg, need, "cuda:0")  # no room for the static shared memory
+    assert not resident.runs_resident(cfg, need, "cuda:0", 64)  # no room for the static shared memory
     gpu.is_cuda = False
     cfg.integrator.kernel = "resident"  # an explicit choice stands (the CPU path of the tests above)
-    assert resident.runs_resident(cfg, need, "cpu")
+    assert resident.runs_resident(cfg, need, "cpu", 1)

@@ -14,6 +14,8 @@ and then the record says so in its field names: `wall_s_extrapolated`, `extrapol
         --n-envs 500 --out results/bench/twin_resident.json     # the frame-resident kernel (issue 17)
     python -m palpation.twin.benchmark --device cuda:0 --kernel resident --resolutions reference \
         --n-envs 500 --variants tiles onesync packed packed:largest_first atomic   # its variants
+    python -m palpation.twin.benchmark --device cuda:0 --kernel resident --resolutions reference --layered \
+        --n-envs 8 32 128 264 --max-frames 40   # the residual loop's layered kernel at its batch sizes
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ import warp as wp
 
 from palpation.io import save_json
 from palpation.tracking import git_commit
+from palpation.twin.agreement import LAYERED, twin_config
 from palpation.twin.bench import time_substeps
 from palpation.twin.config import RESIDENT_COLORINGS, RESIDENT_VARIANTS, TwinConfig
 from palpation.twin.markers import bind_markers
@@ -79,7 +82,7 @@ def bench_point(mesh: SensorMesh, cfg: TwinConfig, n_envs: int, device: str, max
            "frames": SLIDE_FRAMES, "frames_timed": k, "substeps_per_frame": substeps,
            "substeps_per_s": substeps / per_frame, "env_substeps_per_s": n_envs * substeps / per_frame,
            "setup_s": setup, "nodes": mesh.n_nodes, "tets": mesh.n_tets, "commit": git_commit(),
-           "kernel": cfg.integrator.kernel}
+           "kernel": cfg.integrator.kernel, "layered": cfg.layered}
     if cfg.integrator.kernel == "resident":
         ig = cfg.integrator
         rec.update(block_dim=ig.block_dim, resident_variant=ig.resident_variant,
@@ -136,6 +139,8 @@ def main(argv: list[str] | None = None) -> list[dict]:
                         help="resident kernel variants, VARIANT or VARIANT:COLORING (twin.integrator."
                              f"resident_variant: {', '.join(RESIDENT_VARIANTS)}; resident_coloring: "
                              f"{', '.join(RESIDENT_COLORINGS)}); one record each")
+    parser.add_argument("--layered", action="store_true",
+                        help="the residual loop's layered elastic kernel (palpation.twin.agreement.LAYERED)")
     parser.add_argument("--out", type=Path, default=Path("results/bench/twin.json"))
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s %(name)s %(message)s")
@@ -146,7 +151,8 @@ def main(argv: list[str] | None = None) -> list[dict]:
             resident = args.kernel == "resident"
             for variant in (args.variants if resident else [default_variant()]):
                 for block_dim in (args.block_dim if resident else [None]):
-                    cfg = TwinConfig(device=args.device)
+                    cfg = twin_config(LAYERED if args.layered else ())
+                    cfg.device = args.device
                     cfg.integrator.kernel = args.kernel
                     cfg.integrator.block_dim = block_dim or cfg.integrator.block_dim
                     name, _, coloring = variant.partition(":")

@@ -78,6 +78,9 @@ class IntegratorConfig:
     # "auto": resident on CUDA where the config and the block's shared memory allow it, else streamed
     # (always streamed on the CPU: the same bits as "streamed"; resident.runs_resident)
     kernel: str = "streamed"
+    # "auto" runs the streamed kernels for batches of fewer envs: a resident env is one block on one SM whatever the
+    # batch, so few envs leave most SMs idle (1: any batch; to be set from a measured crossover, docs/twin.md)
+    auto_min_envs: int = 1
     # threads per env block of the resident kernel (<= 512: 106 registers a thread; compact <= 384, two blocks an SM).
     # 320 with compact: the fastest point of the H200 variant run, 12.63 s for 500 reference envs (docs/twin.md)
     block_dim: int = 320
@@ -230,6 +233,8 @@ class TwinConfig:
                              "rule reads the scattered forces); use 'scatter' or 'auto'")
         if self.integrator.kernel not in KERNELS:
             raise ValueError(f"twin.integrator.kernel={self.integrator.kernel!r}: use one of {KERNELS}")
+        if self.integrator.auto_min_envs < 1:
+            raise ValueError(f"twin.integrator.auto_min_envs={self.integrator.auto_min_envs}: must be >= 1")
         if self.integrator.kernel == "resident" and self.contact.rule != "sdf":
             raise ValueError("twin.integrator.kernel='resident' needs contact.rule='sdf'; use 'streamed' or 'auto'")
         if (self.integrator.kernel == "resident" and self.layered

@@ -278,17 +278,19 @@ def resident_shared_bytes(variant: str, n_nodes: int, n_force: int) -> int:
     return (2 * n_nodes + (n_force if variant.startswith("compact") else n_nodes)) * VEC3
 
 
-def runs_resident(cfg, needs_force: np.ndarray, device) -> bool:
-    """Whether `cfg.integrator.kernel` selects the frame-resident kernel on `device`.
+def runs_resident(cfg, needs_force: np.ndarray, device, n_envs: int) -> bool:
+    """Whether `cfg.integrator.kernel` selects the frame-resident kernel for `n_envs` envs on `device`.
 
     "auto": on CUDA where the config allows it (SDF contact; the layered elastic kernel only in the packed
-    variants) and an env's tiles fit one block's shared memory (plus 4 KB of static shared memory), else the
-    streamed kernels; always the streamed ones on the CPU, so every CPU result keeps its bits."""
+    variants), for batches of at least `auto_min_envs` envs, and where an env's tiles fit one block's shared
+    memory (plus 4 KB of static shared memory); else the streamed kernels. Always the streamed ones on the CPU,
+    so every CPU result keeps its bits."""
     ig = cfg.integrator
     if ig.kernel != "auto":
         return ig.kernel == "resident"
     dev = wp.get_device(device)
-    if not dev.is_cuda or cfg.contact.rule != "sdf" or (cfg.layered and ig.resident_variant not in LAYERED_VARIANTS):
+    if (not dev.is_cuda or cfg.contact.rule != "sdf" or n_envs < ig.auto_min_envs
+            or (cfg.layered and ig.resident_variant not in LAYERED_VARIANTS)):
         return False
     n = len(needs_force)
     if ig.resident_variant not in ("tiles", "onesync") and n >= NEED_BIT:  # 15-bit packed corner indices

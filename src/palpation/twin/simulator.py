@@ -64,7 +64,7 @@ class BatchedTwin:
         ig, shell = cfg.integrator, shell_weights(mesh.nodes, mesh.tets, cfg.material.shell_thickness)
         self.resident = (ResidentLayout.for_mesh(mesh, needs_force, dev, cap=ig.block_dim, variant=ig.resident_variant,
                                                  coloring=ig.resident_coloring, tet_shell=shell if cfg.layered else None)
-                         if runs_resident(cfg, needs_force, dev) else None)
+                         if runs_resident(cfg, needs_force, dev, n) else None)
         self.tet_order = np.concatenate([moving_ix, np.flatnonzero(~moving)])
         self.n_force_tets = len(moving_ix)
         tets = mesh.tets[self.tet_order]
