@@ -183,6 +183,20 @@ def shell_weights(nodes: np.ndarray, tets: np.ndarray, thickness_m: float) -> np
     return (skin_depth_m(pts) < thickness_m).mean(axis=1)
 
 
+_PER_MESH: dict[tuple, tuple] = {}  # (id(mesh), key) -> (mesh, value); the mesh held so its id stays its own
+
+
+def per_mesh(mesh: SensorMesh, key: tuple, build):
+    """`build()` once per mesh object and key: derived constants that every twin on the same mesh shares (the
+    residual loop builds a twin per call: shell fractions, the resident kernel's colouring). At most 16 kept."""
+    hit = _PER_MESH.get((id(mesh), key))
+    if hit is None or hit[0] is not mesh:
+        if len(_PER_MESH) >= 16:
+            _PER_MESH.pop(next(iter(_PER_MESH)))
+        hit = _PER_MESH[(id(mesh), key)] = (mesh, build())
+    return hit[1]
+
+
 def build_sensor_mesh(resolution: str = "coarse", length_factor: float | None = None) -> SensorMesh:
     """Mesh the sensor; `length_factor` overrides the factor of a named resolution."""
     if length_factor is None:

@@ -24,6 +24,7 @@ from palpation.twin.config import RESIDENT_COLORINGS as COLORINGS
 from palpation.twin.config import RESIDENT_VARIANTS as VARIANTS
 from palpation.twin.contact import ContactParams, surface_contact_force
 from palpation.twin.elasticity import rest_shape, tet_forces
+from palpation.twin.mesh import per_mesh
 from palpation.twin.resident_sync import NEED_BIT, chunk_table, onesync_kernel, pack_corners, packed_kernel
 
 VEC3 = 12
@@ -297,3 +298,17 @@ def runs_resident(cfg, needs_force: np.ndarray, device, n_envs: int) -> bool:
         return False
     return resident_shared_bytes(ig.resident_variant, n, int(needs_force.sum())) + 4096 <= \
         dev.max_shared_memory_per_block
+
+
+def resident_layout(mesh, needs_force: np.ndarray, device, cfg, n_envs: int, shell: np.ndarray):
+    """The resident kernel's layout for a twin of `cfg` (None where `runs_resident` says streamed), built once per
+    mesh and setting (the residual loop builds a twin per call; the colouring costs ~0.3 s at reference).
+    `shell`: per mesh tet shell fractions, used with the layered elastic kernel."""
+    if not runs_resident(cfg, needs_force, device, n_envs):
+        return None
+    ig = cfg.integrator
+    key = ("resident", str(device), block_lanes(device, ig.block_dim), ig.block_dim, ig.resident_variant,
+           ig.resident_coloring, cfg.layered, cfg.material.shell_thickness)
+    return per_mesh(mesh, key, lambda: ResidentLayout.for_mesh(
+        mesh, needs_force, device, cap=ig.block_dim, variant=ig.resident_variant, coloring=ig.resident_coloring,
+        tet_shell=shell if cfg.layered else None))

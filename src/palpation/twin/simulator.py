@@ -21,8 +21,9 @@ from palpation.twin.elasticity import (courant_dt, eval_elastic_forces, eval_ela
 from palpation.twin.integrate import (advance_frame, check_nodes, check_tets, integrate_contact_nodes,
                                       integrate_nodes, load_frame_poses, reset_velocities,
                                       set_control_velocity, snap_fixed_nodes)
-from palpation.twin.mesh import SensorMesh, build_vessel_points, morton_order, projected_node_area, shell_weights
-from palpation.twin.resident import ResidentLayout, launch_resident, runs_resident
+from palpation.twin.mesh import (SensorMesh, build_vessel_points, morton_order, per_mesh, projected_node_area,
+                                 shell_weights)
+from palpation.twin.resident import launch_resident, resident_layout
 from palpation.twin.warp_runtime import resolve_device
 from palpation.twin.parameters import CONTACT_KEYS, ENV_KEYS, LAYERED_KEYS, by_env_key, per_env_keys
 
@@ -61,10 +62,9 @@ class BatchedTwin:
         slots, start = force_slots(mesh.tets[moving_ix], needs_force, N, run_index)  # sums in mesh order
         moving_ix = moving_ix[np.argsort(run_index)]
         # the frame-resident kernel's layout (cfg.integrator.kernel, issue 17); shell fractions per mesh tet
-        ig, shell = cfg.integrator, shell_weights(mesh.nodes, mesh.tets, cfg.material.shell_thickness)
-        self.resident = (ResidentLayout.for_mesh(mesh, needs_force, dev, cap=ig.block_dim, variant=ig.resident_variant,
-                                                 coloring=ig.resident_coloring, tet_shell=shell if cfg.layered else None)
-                         if runs_resident(cfg, needs_force, dev, n) else None)
+        th = cfg.material.shell_thickness
+        shell = per_mesh(mesh, ("shell", th), lambda: shell_weights(mesh.nodes, mesh.tets, th))
+        self.resident = resident_layout(mesh, needs_force, dev, cfg, n, shell)  # None: the streamed kernels
         self.tet_order = np.concatenate([moving_ix, np.flatnonzero(~moving)])
         self.n_force_tets = len(moving_ix)
         tets = mesh.tets[self.tet_order]
