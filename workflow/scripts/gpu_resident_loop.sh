@@ -51,7 +51,11 @@ for k in ('streamed', 'resident'):
   exit 0
 fi
 name=loop_$kernel
-if ! device_attach "$out" "$name"; then
+if device_attach "$out" "$name"; then
+  :
+elif [ -f "$out/$name.rc" ]; then  # finished in an earlier call: report it (a new OUTDIR runs it again)
+  DEVICE_PID=
+else
   device_check_warp gpu_resident_loop "${dev%%:*}" hydra optuna || exit 3
   if [ ! -f "$out/agreement_layered.json" ]; then
     # shellcheck disable=SC2086
