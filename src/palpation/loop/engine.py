@@ -28,6 +28,7 @@ from palpation.loop.config import LoopConfig
 from palpation.loop.effects import EFFECTS, PARAMS, Dof, bounds, clip, move
 from palpation.loop.gate import decide, heldout_z
 from palpation.loop.inputs import Target
+from palpation.loop.projected import recheck
 from palpation.loop.recalibrate import recalibrate
 from palpation.loop.refit import NULL, finish, null_problem, subset_starts
 from palpation.progress import bar
@@ -343,6 +344,14 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                          b["fit"], a["fit"], rec["after"]["gate"]["why"], "kept" if ok else "rejected")
                 # the next try starts from the round's twin; the winner is applied when the round ends
                 p.params, p.markers, p.searched = dict(b_params), b_markers, list(b_searched)
+        proj = recheck(cfg, active, winners, before, simulate) if cfg.projected_null and cfg.null_try else {}
+        for name, r in proj.items():  # the winner against its projected null (loop.projected)
+            w = winners[name]
+            w.record["after"]["gate_projected"] = r
+            if not r["ok"]:
+                w.record["accepted"] = w.record["passed"] = False
+                w.record["after"]["gate"]["why"] += f"; but not beyond re-fitting alone (projected null: {r['why']})"
+                del winners[name]
         for name, w in winners.items():
             p = next(q for q in active if q.name == name)
             p.params, p.markers, p.searched, p.starts = dict(w.params), w.markers, list(w.searched), w.starts
@@ -354,6 +363,8 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                 p.done = True  # every try of this round was rejected
                 if nulls.get(p.name) is not None and cfg.final_refit_starts > 1:  # the same set re-fitted: a
                     p.starts = [nulls[p.name][2]["params_final"], *p.starts][:cfg.final_refit_starts - 1]  # start
+                if "params" in proj.get(p.name, {}) and cfg.final_refit_starts > 1:  # the projected null's end
+                    p.starts = [proj[p.name]["params"], *p.starts][:cfg.final_refit_starts - 1]
         if on_round is not None:
             on_round(k, problems)
         rounds.set_postfix_str(f"{sum(not p.done for p in problems)} of {len(problems)} going", refresh=False)
