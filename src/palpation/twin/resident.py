@@ -22,10 +22,11 @@ import warp as wp
 from palpation.twin.config import LAYERED_VARIANTS
 from palpation.twin.config import RESIDENT_COLORINGS as COLORINGS
 from palpation.twin.config import RESIDENT_VARIANTS as VARIANTS
-from palpation.twin.contact import ContactParams, surface_contact_force
+from palpation.twin.contact import ContactParams
 from palpation.twin.elasticity import rest_shape, tet_forces
 from palpation.twin.mesh import per_mesh
-from palpation.twin.resident_sync import NEED_BIT, chunk_table, onesync_kernel, pack_corners, packed_kernel
+from palpation.twin.resident_sync import (NEED_BIT, chunk_table, contact_and_control, onesync_kernel, pack_corners,
+                                         packed_kernel)
 
 VEC3 = 12
 
@@ -154,15 +155,8 @@ def resident_kernel(n_nodes: int):
                     w = dt * inv_mass[node]
                     vel = vs[node] + w * fs[node]
                     xi = xs[node]
-                    if on_surface[node] != 0:
-                        fc, touched = surface_contact_force(xi, vel, env, node, p, 1)
-                        if s == substeps - 1:
-                            f_c[off + node] = fc
-                        if touched != 0:
-                            contact_flag[env] = 1
-                        vel = vel + w * fc
-                    if fixed[node] != 0:
-                        vel = v_ctl[off + node]
+                    vel = contact_and_control(xi, vel, w, env, node, off + node, s == substeps - 1, fixed,
+                                              on_surface, p, v_ctl, f_c, contact_flag)
                     xn = xi + dt * vel
                 wp.tile_scatter_masked(vs, node, vel, has)
                 wp.tile_scatter_masked(xs, node, xn, has)

@@ -84,6 +84,25 @@ def tile_writers(n_nodes: int):
     return add_plain, add_atomic, store
 
 
+@wp.func
+def contact_and_control(xi: wp.vec3, vel: wp.vec3, w: float, env: int, node: int, slot: int, last: bool,
+                        fixed: wp.array[wp.int32], on_surface: wp.array[wp.int32], p: ContactParams,
+                        v_ctl: wp.array[wp.vec3], f_c: wp.array[wp.vec3], contact_flag: wp.array[wp.int32]):
+    """A node's velocity after its elastic force, as integrate_contact_nodes does it: the surface contact (its force
+    kept in f_c on the frame's last substep), then a driven node's control velocity. `slot`: the node's global index."""
+    out = vel
+    if on_surface[node] != 0:
+        fc, touched = surface_contact_force(xi, vel, env, node, p, 1)
+        if last:
+            f_c[slot] = fc
+        if touched != 0:
+            contact_flag[env] = 1
+        out = vel + w * fc
+    if fixed[node] != 0:
+        out = v_ctl[slot]
+    return out
+
+
 @functools.lru_cache(maxsize=None)
 def node_pass(n_nodes: int):
     """The node pass of every variant here: integrate_contact_nodes' arithmetic, one node per lane,
@@ -102,15 +121,8 @@ def node_pass(n_nodes: int):
                 w = dt * inv_mass[node]
                 vel = vs[node] + w * fs[node]
                 xi = xs[node]
-                if on_surface[node] != 0:
-                    fc, touched = surface_contact_force(xi, vel, env, node, p, 1)
-                    if s == substeps - 1:
-                        f_c[off + node] = fc
-                    if touched != 0:
-                        contact_flag[env] = 1
-                    vel = vel + w * fc
-                if fixed[node] != 0:
-                    vel = v_ctl[off + node]
+                vel = contact_and_control(xi, vel, w, env, node, off + node, s == substeps - 1, fixed, on_surface, p,
+                                          v_ctl, f_c, contact_flag)
                 store(vs, node, vel, True)
                 store(xs, node, xi + dt * vel, True)
                 store(fs, node, zero, True)
@@ -141,15 +153,8 @@ def node_pass_compact(n_nodes: int, n_force: int):
                     vel = vel + w * fs[i]
                     store_f(fs, i, wp.vec3(0.0), True)
                 xi = xs[i]
-                if on_surface[node] != 0:
-                    fc, touched = surface_contact_force(xi, vel, env, node, p, 1)
-                    if s == substeps - 1:
-                        f_c[off + node] = fc
-                    if touched != 0:
-                        contact_flag[env] = 1
-                    vel = vel + w * fc
-                if fixed[node] != 0:
-                    vel = v_ctl[off + node]
+                vel = contact_and_control(xi, vel, w, env, node, off + node, s == substeps - 1, fixed, on_surface, p,
+                                          v_ctl, f_c, contact_flag)
                 store(vs, i, vel, True)
                 store(xs, i, xi + dt * vel, True)
 
