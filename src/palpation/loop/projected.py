@@ -25,6 +25,7 @@ from dataclasses import replace
 from palpation.loop.effects import EFFECTS
 from palpation.loop.gate import decide, heldout_z
 from palpation.loop.polish import polish
+from palpation.loop.refit import refit_kept
 
 log = logging.getLogger(__name__)
 PROJ = "~proj"  # suffix of a projected null's problem name
@@ -75,8 +76,7 @@ def recheck(cfg, problems: list, winners: dict, before: dict, simulate) -> dict[
         real = [p.targets[i].markers for i in held]
         if v.name not in diverged:  # the winner at its optimum, kept as converge() keeps the final refit
             a = v.summary()
-            z = heldout_z(real, [w.markers[i] for i in held], [v.markers[i] for i in held])["z"] if held else 0.0
-            if a["fit"] < w.summary["fit"] and z >= -cfg.gate_z:
+            if refit_kept(p.targets, w.markers, v.markers, w.summary["fit"], a["fit"], cfg.gate_z):
                 w.params, w.markers, w.summary = dict(v.params), v.markers.copy(), a
         if q.name in diverged:  # nothing to compare with: the winner stands
             out[p.name] = {"ok": True, "why": f"projected null diverged at {diverged[q.name]}"}

@@ -77,6 +77,16 @@ def subset_starts(ends, effects) -> list[dict]:
 CONVERGED_REFINE = 3  # the rotation grid's halvings at converged physics (loop.camera_grid_converged; loop.basins)
 
 
+def refit_kept(targets, markers_before, markers_after, fit_before: float, fit_after: float, z_crit: float) -> bool:
+    """Whether a refit's end point replaces the twin: the fitted MAE falls and the held-out change is not
+    significantly worse (z >= -z_crit); else it gained nothing or overfits the fitted states."""
+    if fit_after >= fit_before:
+        return False
+    held = [i for i, t in enumerate(targets) if not t.fit]
+    return not held or heldout_z([targets[i].markers for i in held], [markers_before[i] for i in held],
+                                 [markers_after[i] for i in held])["z"] >= -z_crit
+
+
 def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_crit: float,
              camera_grid: bool = False, steps: Mapping[str, float] | None = None) -> dict[str, dict]:
     """The final refit: Levenberg-Marquardt (loop.polish) on every problem's searched parameters from its
@@ -101,10 +111,7 @@ def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_cri
     for p in going:
         params, markers = old[p.name]
         b, a = log_[p.name]["before"], p.summary() if p.name not in diverged else None
-        held = [i for i, t in enumerate(p.targets) if not t.fit]
-        z = heldout_z([p.targets[i].markers for i in held], [markers[i] for i in held],
-                      [p.markers[i] for i in held])["z"] if held and a else 0.0
-        if a is None or a["fit"] >= b["fit"] or z < -z_crit:  # no gain, or it overfits the fitted states
+        if a is None or not refit_kept(p.targets, markers, p.markers, b["fit"], a["fit"], z_crit):
             p.params, p.markers = params, markers
         else:
             log_[p.name].update(kept=res[p.name]["kept"], starts=res[p.name]["chains"],
