@@ -95,6 +95,7 @@ class LoopConfig:
     # absorbed a k_s error (dev seed 1, docs/loop.md); at converged physics it reaches the truth (the same sets at the
     # true physics: 0.25-0.33 px). With projected_null: 60-run self-test (issue 13) exact set 84 -> 92 % on seed 0,
     # 76 -> 86 % on seed 2 (never used in development), in-list `unexplained` 2 -> 0 / 2 -> 2 (docs/loop.md)
+    # (base and the GPU self-test; quick and paper keep it off until a full paper run re-makes their tables)
     camera_grid_converged: bool = True
     # a set's search also starts from the end point of every subset of it tried earlier in the round (the null
     # try's: the empty set), so a larger set fits at least as well as what it contains (loop.refit.subset_starts)
