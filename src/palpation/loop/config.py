@@ -123,6 +123,11 @@ class LoopConfig:
     # with the defaults of base, adopt in base_loop if in-list `unexplained` falls on either seed and no run named
     # exactly without it is missed with it, on either seed
     final_refit_regrid: int = 0
+    # the final refit also starts from its end point with each added effect switched off (where that point lies in the
+    # search box; not contact), above unexplained_ratio x the noise (loop.refit.effect_off_starts): an effect kept in
+    # an early round can hold a compensating basin once a later one arrived (held-out seed 2, run 31: contact + camera
+    # + mount for contact + mount, `unexplained` at 2.3x). Opt-in; the same adoption rule as final_refit_regrid
+    final_refit_off_starts: bool = False
     # every try (the null try too) is finished by a bounded Levenberg-Marquardt solver after its search
     # (loop.polish): polish_iters iterations from its polish_starts best distinct trials (0 = off), so tries
     # are compared at convergence; the final refit starts from the final twin and final_refit_starts - 1

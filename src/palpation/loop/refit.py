@@ -34,7 +34,7 @@ from typing import Mapping
 import numpy as np
 
 from palpation.loop.attribution import Signature, fit_subset
-from palpation.loop.effects import clip, move
+from palpation.loop.effects import EFFECTS, PARAMS, bounds, clip, move
 from palpation.loop.gate import heldout_z
 from palpation.loop.basins import camera_starts, nominal_steps
 from palpation.loop.compete import at_noise
@@ -90,13 +90,14 @@ def refit_kept(targets, markers_before, markers_after, fit_before: float, fit_af
 
 def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_crit: float,
              camera_grid: bool = False, steps: Mapping[str, float] | None = None, regrid: int = 0,
-             ratio: float = 2.0) -> dict[str, dict]:
+             ratio: float = 2.0, off_starts: bool = False) -> dict[str, dict]:
     """The final refit: Levenberg-Marquardt (loop.polish) on every problem's searched parameters from its
     current twin and p.starts (the last kept try's other distinct best trials), all problems in one batch
     per step. The end point is kept only if the fitted MAE falls and the held-out change is not
     significantly worse (z >= -z_crit); else the twin stays. Returns per problem the fit/held-out MAE
     before and after, the LM iterations kept and the starts. `regrid` (loop.final_refit_regrid): up to that
-    many more passes of the camera's rotation grid at the refit's own end point, each followed by LM (regrid)."""
+    many more passes of the camera's rotation grid at the refit's own end point, each followed by LM (regrid);
+    `off_starts` (loop.final_refit_off_starts): one more start per added effect, switched off (effect_off_starts)."""
     from palpation.loop.engine import evaluate
 
     log_ = {p.name: {"before": p.summary(), "kept": 0, "converged": True, "regrid": 0} for p in problems}
@@ -108,6 +109,9 @@ def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_cri
                              nominal_steps(steps or {}), True, CONVERGED_REFINE)
         for name, s in grid.items():
             starts[name].append(s)
+    if off_starts:
+        for p in going:
+            starts[p.name] += effect_off_starts(p, {**(limits or {}), **p.trust}, ratio)
     res = polish(going, starts, simulate,
                  {p.name: {**(limits or {}), **p.trust} for p in going}, iters)
     diverged = evaluate(going, simulate, strict=False)
@@ -131,6 +135,25 @@ def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_cri
                      log_[p.name]["before"]["fit"], log_[p.name]["after"]["fit"],
                      "" if log_[p.name]["converged"] else " (stopped at loop.final_refit_iters, not converged)")
     return log_
+
+
+def effect_off_starts(p, limits: Mapping | None, ratio: float) -> list[dict]:
+    """loop.final_refit_off_starts: the final twin with each added effect switched off (its parameters back at
+    their off values), for the effects whose off point lies inside the search box (not surface contact: k_s = 0),
+    when the fitted residual is above `ratio` x the noise. The converse of the nested starts at the end: a set's
+    final refit also sees the basins of its subsets, reached from its own end point. An effect kept in an early
+    round can hold a compensating basin after a later effect arrived, and the projected null tested it only
+    against the set before it (held-out seed 2, run 31: contact + camera won round 1 while the true pair's search
+    stalled at 1.67 px, the mount joined in round 2, the final refit ended at 0.53 px; docs/loop.md)."""
+    n_coords = sum(t.fit for t in p.targets) * p.targets[0].markers.size if p.targets else 0
+    if not p.effects or at_noise(p.summary(), n_coords, p.noise_px, ratio):
+        return []
+    out = []
+    for e in p.effects:
+        names = EFFECTS[e].params
+        if all(bounds(n, limits)[0] <= PARAMS[n].default <= bounds(n, limits)[1] for n in names):
+            out.append({**p.params, **{n: PARAMS[n].default for n in names}})
+    return out
 
 
 def regrid_passes(problems: list, simulate, limits: Mapping | None, iters: int, z_crit: float, passes: int,

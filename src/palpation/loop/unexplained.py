@@ -179,7 +179,8 @@ def check_all(problems: list, simulate, cfg, sigmas: Mapping[str, float]) -> Non
     polished = {}
     if cfg.final_refit_iters > 0:  # test what the twin cannot reach, not what the search left (loop.refit)
         polished = converge(problems, simulate, cfg.search.bounds, cfg.final_refit_iters, cfg.gate_z,
-                            cfg.camera_grid_converged, dict(cfg.steps), cfg.final_refit_regrid, cfg.unexplained_ratio)
+                            cfg.camera_grid_converged, dict(cfg.steps), cfg.final_refit_regrid, cfg.unexplained_ratio,
+                            cfg.final_refit_off_starts)
     stale = [p for p in problems if p.last_signatures is None or p.last_signatures["params"] != p.params]
     for p in stale:
         p.refit = refit_dofs(p)
