@@ -139,16 +139,42 @@ def make_sets(injections: list[Injection], states: list[Target], simulate, noise
                          "(loop.selftest.strength_high) or the nominal steps (loop.steps)")
     paths = []
     for inj, block in zip(injections, markers.reshape(len(injections), len(states), -1, 2)):
-        for u in inj.unlisted:
-            block = UNLISTED[u](block, inj.strengths[u], rng)
-        noisy = block + rng.normal(0.0, noise_px, block.shape)
-        mset = make_measured_set(noisy, np.ones(noisy.shape[:2], bool), rest_px,
-                                 [geometry[t.name] for t in states], source="palpation.loop.selftest",
-                                 detector={"kind": "twin", "noise_px": noise_px})
+        mset = _measured(inj, block, states, noise_px, rng, geometry, rest_px)
         path = Path(out_dir) / f"run_{inj.run:03d}"
         save_measured_set(path, mset)
         paths.append(path)
     return paths
+
+
+def _measured(inj: Injection, block: np.ndarray, states: list[Target], noise_px: float, rng: np.random.Generator,
+              geometry: Mapping[str, MeasuredState], rest_px: np.ndarray):
+    """One run's simulated markers (S, 127, 2) -> its measured set: out-of-list effects, then detector noise."""
+    for u in inj.unlisted:
+        block = UNLISTED[u](block, inj.strengths[u], rng)
+    noisy = block + rng.normal(0.0, noise_px, block.shape)
+    return make_measured_set(noisy, np.ones(noisy.shape[:2], bool), rest_px, [geometry[t.name] for t in states],
+                             source="palpation.loop.selftest", detector={"kind": "twin", "noise_px": noise_px})
+
+
+def remake_set(cfg: LoopConfig, base: Mapping[str, float], states: list[Target], simulate, run: int,
+               geometry: Mapping[str, MeasuredState], rest_px: np.ndarray):
+    """(Injection, measured set) of self-test run `run` exactly as run_selftest makes it from loop.selftest.seed, with
+    only that run simulated: the earlier runs' random draws (out-of-list effects, noise) are replayed on a dummy block
+    (their count does not depend on the markers). For studying one run of a 60-run self-test on a CPU."""
+    rng = np.random.default_rng(cfg.selftest.seed)
+    injections = draw_injections(cfg, base, rng)
+    if not 0 <= run < len(injections):
+        raise ValueError(f"self-test run {run}: this configuration has runs 0..{len(injections) - 1} "
+                         "(loop.selftest.cases x runs_per_case)")
+    dummy = np.zeros((len(states), *np.shape(states[0].markers)))
+    for inj in injections[:run]:
+        _measured(inj, dummy, states, cfg.selftest.noise_px, rng, geometry, rest_px)
+    inj = injections[run]
+    markers, failed = simulate([(t.state, inj.params) for t in states])
+    if np.any(failed):
+        raise ValueError(f"self-test: the twin diverged while making run {run}")
+    block = np.asarray(markers).reshape(len(states), -1, 2)
+    return inj, _measured(inj, block, states, cfg.selftest.noise_px, rng, geometry, rest_px)
 
 
 def run_selftest(cfg: LoopConfig, simulate, base: Mapping[str, float], template: list[Target],
