@@ -92,7 +92,7 @@ def test_a_negative_regrid_is_refused_in_one_line():
 def test_a_spurious_camera_basin_is_left_only_from_the_camera_off_start(on):
     """loop.final_refit_off_starts (held-out seed 2, run 31's class): the data have the stiffness and no camera; the
     final twin holds a camera kept in an early round, in a basin 8 deg off, with the stiffness 10 % off. LM from the
-    final twin stays in that basin above 1 px; from the same point with the camera switched off (nominal) it reaches
+    final twin stays in that basin above 1 px; from its end point with the camera switched off (nominal) it reaches
     the truth, and the camera ends at nominal."""
     rng = np.random.default_rng(7)
     truth = initial_params({"E": E_TRUE})
@@ -102,7 +102,7 @@ def test_a_spurious_camera_basin_is_left_only_from_the_camera_off_start(on):
                 ["E", *CAM], effects=["camera"], candidates=[], noise_px=0.05)
     p.markers = np.stack([toy(t.state, p.params) for t in targets])
     log = converge([p], simulate, None, 6, 2.0, off_starts=on)
-    assert log["toy"]["before"]["fit"] > 2.0
+    assert log["toy"]["before"]["fit"] > 2.0 and log["toy"]["off"] == int(on)
     if on:
         assert abs(p.params["cam_rotation_deg"]) < 0.1 and abs(p.params["cam_dx_px"]) < 0.5, p.params
         assert log["toy"]["after"]["fit"] < 0.1 and abs(np.log(p.params["E"] / E_TRUE)) < 0.01
@@ -111,12 +111,19 @@ def test_a_spurious_camera_basin_is_left_only_from_the_camera_off_start(on):
 
 
 def test_off_starts_leave_out_contact_and_fits_at_the_noise():
-    """Surface contact's off point (k_s = 0) is outside its search box; a fit at the noise gets no start."""
+    """Surface contact's off point (k_s = 0) is outside its search box; a fit at the noise gets no effect-off pass."""
     from palpation.loop.refit import effect_off_starts
     p = problem(noise_px=0.05)
     p.effects = ["surface_contact", "camera"]
     p.params.update(k_s=2000.0, cam_dx_px=10.0)
-    starts = effect_off_starts(p, None, 2.0)
+    starts = effect_off_starts(p, None)
     assert len(starts) == 1 and starts[0]["cam_dx_px"] == 0.0 and starts[0]["k_s"] == 2000.0
-    p.noise_px = 50.0
-    assert effect_off_starts(p, None, 2.0) == []
+    calls = {}
+    for on in (False, True):
+        calls[on] = []
+        p = problem(noise_px=50.0)  # every fit here is "at the noise"
+        p.effects = ["camera"]
+        log = converge([p], lambda jobs, c=calls[on]: (c.append(len(jobs)), simulate(jobs))[1], None, 6, 2.0,
+                       off_starts=on)
+        assert log["toy"]["off"] == 0
+    assert calls[True] == calls[False]

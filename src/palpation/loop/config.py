@@ -116,7 +116,7 @@ class LoopConfig:
     final_refit_iters: int = 10
     # after the final refit, up to this many more passes of the camera's rotation grid (3 halvings) at the refit's own
     # end point, each followed by LM and kept as the refit (fit falls, held-out not significantly worse), while the
-    # fitted residual stays above unexplained_ratio x the noise (loop.refit.regrid_passes). The first pass's grid runs
+    # fitted residual stays above unexplained_ratio x the noise (loop.refit.after_passes). The first pass's grid runs
     # at the final twin, which need not be the start the refit ends from: held-out seed 2, runs 31 / 39 (contact + a
     # camera) were flagged `unexplained` at 2.3 / 2.0x at a converged (k_s, f) stall (docs/loop.md, "Held-out seed").
     # CPU, run 39's stall re-made: the grid at it takes the excess 2.02 -> 1.39x. Opt-in (0 = off). Adoption rule,
@@ -124,8 +124,8 @@ class LoopConfig:
     # in-list `unexplained` over both seeds falls (now 0 + 2), no run named exactly without it is missed with it on
     # either seed, and out-of-list `unexplained` stays >= 80 % (docs/loop.md, "Held-out seed")
     final_refit_regrid: int = 0
-    # the final refit also starts from its end point with each added effect switched off (where that point lies in the
-    # search box; not contact), above unexplained_ratio x the noise (loop.refit.effect_off_starts): an effect kept in
+    # after the final refit, one LM pass from its end point with each added effect switched off (where that point lies in
+    # the search box; not contact), above unexplained_ratio x the noise (loop.refit.after_passes): an effect kept in
     # an early round can hold a compensating basin once a later one arrived (held-out seed 2, run 31: contact + camera
     # + mount for contact + mount, `unexplained` at 2.3x; on the CPU LM from its camera-off point reaches the truth,
     # 1.05x). Opt-in; the same adoption rule as final_refit_regrid

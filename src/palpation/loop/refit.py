@@ -95,12 +95,12 @@ def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_cri
     current twin and p.starts (the last kept try's other distinct best trials), all problems in one batch
     per step. The end point is kept only if the fitted MAE falls and the held-out change is not
     significantly worse (z >= -z_crit); else the twin stays. Returns per problem the fit/held-out MAE
-    before and after, the LM iterations kept and the starts. `regrid` (loop.final_refit_regrid): up to that
-    many more passes of the camera's rotation grid at the refit's own end point, each followed by LM (regrid);
-    `off_starts` (loop.final_refit_off_starts): one more start per added effect, switched off (effect_off_starts)."""
+    before and after, the LM iterations kept and the starts. Then, for sets still above `ratio` x their noise,
+    passes from the refit's own end point (`after_passes`): `off_starts` (loop.final_refit_off_starts) one with each
+    added effect switched off, `regrid` (loop.final_refit_regrid) up to that many with the camera's rotation grid."""
     from palpation.loop.engine import evaluate
 
-    log_ = {p.name: {"before": p.summary(), "kept": 0, "converged": True, "regrid": 0} for p in problems}
+    log_ = {p.name: {"before": p.summary(), "kept": 0, "converged": True, "regrid": 0, "off": 0} for p in problems}
     going = [p for p in problems if p.searched]
     old = {p.name: (dict(p.params), p.markers) for p in going}
     starts = {p.name: [dict(p.params), *p.starts] for p in going}
@@ -109,9 +109,6 @@ def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_cri
                              nominal_steps(steps or {}), True, CONVERGED_REFINE)
         for name, s in grid.items():
             starts[name].append(s)
-    if off_starts:
-        for p in going:
-            starts[p.name] += effect_off_starts(p, {**(limits or {}), **p.trust}, ratio)
     res = polish(going, starts, simulate,
                  {p.name: {**(limits or {}), **p.trust} for p in going}, iters)
     diverged = evaluate(going, simulate, strict=False)
@@ -123,31 +120,28 @@ def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_cri
         else:
             log_[p.name].update(kept=res[p.name]["kept"], starts=res[p.name]["chains"],
                                 converged=res[p.name]["converged"])
-    if regrid > 0:
-        regrid_passes([p for p in going if p.name not in diverged], simulate, limits, iters, z_crit, regrid,
-                      ratio, old, log_, steps)
+    after_passes([p for p in going if p.name not in diverged], simulate, limits, iters, z_crit, ratio, old, log_,
+                 steps, regrid, off_starts)
     for p in problems:
         log_[p.name]["after"] = p.summary()
-        if log_[p.name]["kept"] or log_[p.name]["regrid"]:
+        x = log_[p.name]
+        if x["kept"] or x["regrid"] or x["off"]:
+            extra = "".join(f", {n} {what} pass(es) kept" for n, what in ((x["off"], "effect-off"),
+                                                                          (x["regrid"], "camera regrid")) if n)
             log.info("loop '%s': final refit, %d LM step(s) from %d start(s)%s: fit MAE %.3f -> %.3f px%s", p.name,
-                     log_[p.name]["kept"], log_[p.name].get("starts", 0),
-                     f", {log_[p.name]['regrid']} camera regrid pass(es) kept" if log_[p.name]["regrid"] else "",
-                     log_[p.name]["before"]["fit"], log_[p.name]["after"]["fit"],
-                     "" if log_[p.name]["converged"] else " (stopped at loop.final_refit_iters, not converged)")
+                     x["kept"], x.get("starts", 0), extra, x["before"]["fit"], x["after"]["fit"],
+                     "" if x["converged"] else " (stopped at loop.final_refit_iters, not converged)")
     return log_
 
 
-def effect_off_starts(p, limits: Mapping | None, ratio: float) -> list[dict]:
-    """loop.final_refit_off_starts: the final twin with each added effect switched off (its parameters back at
-    their off values), for the effects whose off point lies inside the search box (not surface contact: k_s = 0),
-    when the fitted residual is above `ratio` x the noise. The converse of the nested starts at the end: a set's
-    final refit also sees the basins of its subsets, reached from its own end point. An effect kept in an early
-    round can hold a compensating basin after a later effect arrived, and the projected null tested it only
-    against the set before it (held-out seed 2, run 31: contact + camera won round 1 while the true pair's search
-    stalled at 1.67 px, the mount joined in round 2, the final refit ended at 0.53 px; docs/loop.md)."""
-    n_coords = sum(t.fit for t in p.targets) * p.targets[0].markers.size if p.targets else 0
-    if not p.effects or at_noise(p.summary(), n_coords, p.noise_px, ratio):
-        return []
+def effect_off_starts(p, limits: Mapping | None) -> list[dict]:
+    """loop.final_refit_off_starts: the twin with each added effect switched off (its parameters back at their off
+    values), for the effects whose off point lies inside the search box (not surface contact: k_s = 0). The converse
+    of the nested starts at the end: a set's final refit also sees the basins of its subsets, reached from its own end
+    point. An effect kept in an early round can hold a compensating basin after a later effect arrived, and the
+    projected null tested it only against the set before it (held-out seed 2, run 31: contact + camera won round 1
+    while the true pair's search stalled at 1.67 px, the mount joined in round 2, the final refit ended at 0.53 px;
+    on the CPU, LM from that end point with the camera off reaches the truth: docs/loop.md, "Held-out seed")."""
     out = []
     for e in p.effects:
         names = EFFECTS[e].params
@@ -156,41 +150,56 @@ def effect_off_starts(p, limits: Mapping | None, ratio: float) -> list[dict]:
     return out
 
 
-def regrid_passes(problems: list, simulate, limits: Mapping | None, iters: int, z_crit: float, passes: int,
-                  ratio: float, old: Mapping[str, tuple], log_: dict, steps: Mapping[str, float] | None) -> None:
-    """loop.final_refit_regrid: the camera's rotation grid again at the final refit's end point, then LM from it,
-    up to `passes` times per problem while each pass is kept (fit falls, held-out against the twin before the
-    refit not significantly worse: refit_kept). The grid's closed-form f absorbs a stiffness error unless the
-    physics is at its optimum (dev seed 1), and the first pass's grid runs at the final twin, which need not be
-    the start the refit ends from (held-out seed 2, run 39: the final twin at a fit of 0.72 px, the last null
-    try's converged end point, where the refit ended, at 0.41 px; docs/loop.md, "Held-out seed"). A set whose
-    fitted residual is within `ratio` x its noise (p.noise_px, the final check's size) has no basin to find."""
+def after_passes(problems: list, simulate, limits: Mapping | None, iters: int, z_crit: float, ratio: float,
+                 old: Mapping[str, tuple], log_: dict, steps: Mapping[str, float] | None, regrid: int,
+                 off_starts: bool) -> None:
+    """Passes of LM from the final refit's own end point, each kept as the refit is (fit falls, held-out against
+    the twin before the refit not significantly worse: refit_kept), for the sets whose fitted residual stays above
+    `ratio` x their noise (p.noise_px; the final check's size: at the noise there is no basin left to find):
+    * `off_starts`: one pass from the end point and each added effect switched off (effect_off_starts);
+    * `regrid`: then up to that many passes with the camera's rotation grid (3 halvings) at the end point, the next
+      only after a kept one. The grid's closed-form f absorbs a stiffness error unless the physics is at its optimum
+      (dev seed 1), and the refit's own grid runs at the final twin, which need not be the start the refit ends from
+      (held-out seed 2, run 39: the final twin at a fit of 0.72 px, the last null try's converged end point, where
+      the refit ended, at 0.41 px; on the CPU the grid at that point takes the excess 2.02 -> 1.39x)."""
     from palpation.loop.engine import evaluate
 
     lims = {p.name: {**(limits or {}), **p.trust} for p in problems}
-    n_coords = {p.name: sum(t.fit for t in p.targets) * p.targets[0].markers.size for p in problems if p.targets}
-    todo = list(problems)
-    for _ in range(passes):
-        todo = [p for p in todo if not at_noise(p.summary(), n_coords[p.name], p.noise_px, ratio)]
-        grid = camera_starts(todo, simulate, lims, nominal_steps(steps or {}), True, CONVERGED_REFINE)
-        todo = [p for p in todo if p.name in grid]
-        if not todo:
-            return
+
+    def above(ps):
+        return [p for p in ps if not at_noise(p.summary(), sum(t.fit for t in p.targets) * p.targets[0].markers.size,
+                                              p.noise_px, ratio)]
+
+    def one_pass(todo, extra, key):  # LM from the end point and `extra` starts; the problems whose pass was kept
         prev = {p.name: (dict(p.params), p.markers, p.summary()["fit"]) for p in todo}
-        res = polish(todo, {p.name: [dict(p.params), grid[p.name]] for p in todo}, simulate, lims, iters)
+        res = polish(todo, {p.name: [dict(p.params), *extra[p.name]] for p in todo}, simulate, lims, iters)
         diverged = evaluate(todo, simulate, strict=False)
         kept = []
         for p in todo:
             params, markers, fit = prev[p.name]
             a = p.summary() if p.name not in diverged else None
             if a is None or not refit_kept(p.targets, old[p.name][1], p.markers, fit, a["fit"], z_crit):
-                p.params, p.markers = params, markers  # this pass found nothing better: the problem is done
+                p.params, p.markers = params, markers
                 continue
-            log_[p.name]["regrid"] += 1
+            log_[p.name][key] += 1
             log_[p.name]["kept"] += res[p.name]["kept"]
             log_[p.name]["converged"] = res[p.name]["converged"]
             kept.append(p)
-        todo = kept
+        return kept
+
+    if off_starts:
+        offs = {p.name: effect_off_starts(p, lims[p.name]) for p in above(problems)}
+        todo = [p for p in problems if offs.get(p.name)]
+        if todo:
+            one_pass(todo, offs, "off")
+    todo = list(problems)
+    for _ in range(regrid):
+        todo = above(todo)
+        grid = camera_starts(todo, simulate, lims, nominal_steps(steps or {}), True, CONVERGED_REFINE)
+        todo = [p for p in todo if p.name in grid]
+        if not todo:
+            return
+        todo = one_pass(todo, {n: [g] for n, g in grid.items()}, "regrid")
 
 
 def finish(cfg: LoopConfig, problems: list, fits: dict[str, dict], simulate, basins=(), converge=(),
