@@ -22,7 +22,11 @@ contact fit left), and the final check reads it as unexplained. Two guards, both
   every subset of it tried earlier in the round (the null try's is the empty set), with the new effects off.
   A larger set contains each subset's optimum, so it can only fit as well or better; from its own warm starts
   alone a 6-parameter contact + camera search ended at a fit of 2.50 px where contact alone had reached
-  2.05 px (60-run H200 self-test, run 36), and the pair then lost to the single it contains.
+  2.05 px (60-run H200 self-test, run 36), and the pair then lost to the single it contains;
+* **passes after the final refit** (`after_passes`, opt-in: loop.final_refit_off_starts, loop.final_refit_regrid):
+  LM again from the refit's own end point, with each added effect switched off, then with the camera's rotation grid
+  at that point, for sets still above the noise (held-out seed 2, runs 31 and 39: converged stalls of a set that
+  contains the truth).
 """
 
 from __future__ import annotations
