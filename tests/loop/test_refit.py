@@ -109,8 +109,9 @@ def test_a_null_try_finished_by_the_local_solver_refuses_an_absorbing_effect(tmp
     # loses and the mount is kept, with it both tries end at the same optimum and the mount is refused
     cubic = 0.15
     p = problem({"E": E0, "mount_tilt_x_deg": 0.0}, start_E=E0 * 2.5, cubic=cubic)
+    # projected_null off: it would refuse the mount by itself (its LM re-fit is a local finish too: test_projected)
     c = LoopConfig(effects=["mount"], tries_per_round=1, pair_tries=0, null_try=True, polish_iters=polish_iters,
-                   search=SearchSettings(sampler="random", n_trials=8, n_startup=8)).validate()
+                   projected_null=False, search=SearchSettings(sampler="random", n_trials=8, n_startup=8)).validate()
     evaluate([p], sim_of(cubic))
     run_rounds([p], sim_of(cubic), c, tmp_path / "s.db", "toy", 1)
     tried = [r for r in p.rounds if r["effects"] == ["mount"]][0]
