@@ -209,8 +209,9 @@ def recipe_crossfit_section(cf: pd.DataFrame, ablation: pd.DataFrame | None = No
             "(rule `recipe_crossfit`, docs/recipe.md \"Cross-fitted calibration\"): every figure on a set comes from "
             "parameters chosen on data other than that set. Means (± sample std for ECE) over seeds; robust recipe, "
             "full and minus `calibration`." + same_text + "\n\n"
-            "**What chose what**: the Sim val split chose the recipe (early stopping, stored Platt); the real sets "
-            "chose each other's calibration and threshold, never their own:\n\n" + "\n".join(chose) + "\n\n"
+            "**What chose what**: the Sim val split chose the recipe (its early stopping and stored Platt; the Meat "
+            "val trials for the Meat-trained model); the real sets chose each other's calibration and map threshold, "
+            "never their own:\n\n" + "\n".join(chose) + "\n\n"
             + crossfit_table(cf)
             + (f"\nReliability per test set: [reliability_crossfit.png]({figure})\n" if figure else "")
             + "\n**Aims of issue 15 under the cross-fitted calibration** (robust recipe; from the CSVs above):\n\n"
