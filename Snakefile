@@ -39,6 +39,7 @@ rule all:
         plain(TWIN_ABLATION_FILES),  # common.smk: empty where the profile skips the dataset-twin ablation
         plain(rules.vessel_maps.output),
         plain(RECIPE_REPORT_FILES),  # common.smk: empty where the profile skips the recipe ablation
+        plain(RECIPE_CROSSFIT_FILES),  # common.smk: the recipe ablation's calibration cross-fitted (real sets)
         plain(JUDGE_FILES),  # judge.smk: empty where the profile skips the downstream judge (judge.seeds [])
         plain(rules.results_page.output),
         killed_outputs(),

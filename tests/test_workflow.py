@@ -57,7 +57,7 @@ def test_dry_run_lists_the_whole_dag(tmp_path, default_listing):
     upstream = {"mesh", "simulate_canonical", "simulate_vessel_slide", "simulate_dataset", "train", "train_report"}
     quick = yaml.safe_load((REPO_ROOT / "conf" / "workflow" / "quick.yaml").read_text())
     if quick["train"]["recipe_ablation"]["seeds"]:  # RECIPE_REPORT_FILES, empty where the profile skips it
-        upstream |= {"train_recipe", "recipe_report"}
+        upstream |= {"train_recipe", "recipe_report", "recipe_crossfit"}  # quick's A-to-B/A-to-C are partners
     assert named | upstream | {"all"} == rules
     for rule in rules:
         assert f"rule {rule}:" in listing, f"{rule} has no job in the dry run's listing"
@@ -189,10 +189,14 @@ def test_judge_reuse_reruns_only_what_the_slide_loop_changes(tmp_path):
 
 def test_paper_recipe_ablation_plan(tmp_path):
     """The paper profile's recipe ablation (docs/recipe.md, its device-time plan): with train.seeds_together one job
-    per (recipe, switch_off, training set), A-to-B and A-to-C trained once; switch rows for those two only."""
+    per (recipe, switch_off, training set), A-to-B and A-to-C trained once; switch rows for those two only; the
+    results page reads the cross-fitted calibration."""
     listing = dry_run(tmp_path, "-p", "--workflow-profile", str(REPO_ROOT / "workflow/profiles/paper"),
-                      "results/recipe/report/recipe_ablation.csv")
+                      "results/recipe/report/recipe_ablation.csv", "results/README.md")
     stats = job_stats(listing)
+    # the page reads the calibration cross-fitted between the real sets (RECIPE_CROSSFIT_FILES): one job, before it
+    page = listing.split("rule results_page:")[1].split("output:")[0]
+    assert stats["recipe_crossfit"] == 1 and "results/recipe/report/recipe_calibration_crossfit.csv" in page
     assert stats["train_recipe_seeds_sim_large"] == 8  # reference, robust minus each of 7 switches
     # robust, whose job also writes robust minus `calibration` (the same models' raw scores)
     assert stats["train_recipe_robust_sim_large"] == 1

@@ -170,7 +170,7 @@ def test_explanation_conditions_and_bad_file(tmp_path):
         load_explanations(bad)
     assert set(load_explanations(EXPLANATIONS)) <= {"run", "data", "calibration", "loop", "seed_sweep", "table3",
                                                     "table4_markers", "table4_maps", "twin_ablation", "recipe_ablation",
-                                                    "twin_selection"}
+                                                    "recipe_crossfit", "twin_selection"}
 
 
 def test_write_is_atomic(tmp_path, monkeypatch):
@@ -253,3 +253,53 @@ def test_twin_ablation_files_join_the_inputs_when_defined(tmp_path):
     job = text.split("rule results_page:")[1]
     assert "results/train/report/twin_ablation.csv" in job.split("output:")[0]
     assert "palpation.apps.results_page root=results out=results/README.md profile=quick" in text
+
+
+def crossfit_rows() -> list[dict]:
+    """A toy recipe_calibration_crossfit.csv: robust rows of the three configurations under each calibration."""
+    base = dict(recipe="robust", switch_off="none", seeds=5, ece_std=0.001, brier=0.1, map_recall=0.8,
+                map_pred_px=1000.0, map_threshold_from="test map (SPEC §12, quirk 18)", d_bar_05_mm=2.5,
+                map_recall_05=0.6, d_bar_05_seeds=5)
+    rows = []
+    for config, ap, partner in (("A-to-B", 0.35, "meat (A-to-C scores)"), ("A-to-C", 0.31, "silicone (A-to-B scores)"),
+                                ("C-to-B", 0.25, None)):
+        for cal, ece, pos, fitted in (("stored", 0.2, 0.4, "sim_val"), ("cross_real", 0.07, 0.1, partner),
+                                      ("cross_real_shift", 0.09, 0.1, partner), ("in_sample", 0.01, 0.0, "itself")):
+            fitted = "meat_val" if partner is None and cal != "in_sample" else fitted
+            cross = cal.startswith("cross") and partner is not None
+            rows.append({**base, "config": config, "calibration": cal, "fitted_on": fitted, "ece": ece,
+                         "pos_share_05": pos, "ap": ap, "d_bar_mm": 4.5 if cross else 3.5,
+                         "map_pred_px": 3000.0 if cross else 1000.0,
+                         "map_threshold_from": "other map (SPEC §12 rule)" if cross else base["map_threshold_from"]})
+    rows.append({**rows[0], "switch_off": "calibration", "fitted_on": "none", "ece": 0.45, "pos_share_05": 0.7})
+    return rows
+
+
+def test_crossfit_section_says_by_how_much_each_aim_is_missed(tmp_path):
+    root = fake_results(tmp_path / "results")
+    assert ("*Not produced by this run*: `recipe/report/recipe_calibration_crossfit.csv` is missing (rule "
+            "`recipe_crossfit` makes it).") in page(root)
+    csv(root, "recipe/report/recipe_calibration_crossfit.csv", crossfit_rows())
+    csv(root, "recipe/report/recipe_ablation.csv", [
+        dict(config="C-to-B", recipe="robust", switch_off="none", seeds=5, auroc_mean=0.7, auroc_std=0.01,
+             ap_mean=0.25, ap_std=0.05, pos_share_05=0.0, ece=0.02, d_bar_mm=2.0)])
+    (root / "recipe/report/reliability_crossfit.png").write_bytes(b"png")
+    text = page(root, links="results/paper")
+    sec = text.split("## Training recipe: calibration cross-fitted")[1].split("\n## ")[0]
+    assert "Not produced" not in sec
+    assert "* A-to-B (Sim→Silicone): scores calibrated on meat (A-to-C scores); map threshold from other map" in sec
+    assert "C-to-B (Meat→Silicone): scores calibrated on meat_val" in sec and "nothing to cross-fit" in sec
+    assert "robust − `calibration`: the raw scores | none | 0.4500 ± 0.0010 | 70.0 % |" in sec
+    assert "[reliability_crossfit.png](results/paper/recipe/report/reliability_crossfit.png)" in sec
+    # every aim from the CSVs: AP 0.35 vs 0.40, ECE 0.07 vs 0.05, d-bar 4.5 vs 3 mm, AP std 0.05 vs 0.03
+    assert "A-to-B (Sim→Silicone): AP 0.350 (aim >= 0.4): **missed by 0.050**; why: AP is the same" in sec
+    assert "A-to-C (Sim→Meat): AP 0.310 (aim >= 0.3): met." in sec
+    assert "C-to-B (Meat→Silicone): AP std over seeds 0.0500 (aim <= 0.03): **missed by 0.0200**" in sec
+    assert "A-to-B (Sim→Silicone): positive at 0.5 10.0 % (aim <= 30 %): met." in sec
+    assert "A-to-C (Sim→Meat): ECE 0.070 (aim <= 0.05): **missed by 0.020**; why: Platt fitted on the test set" in sec
+    assert "C-to-B (Meat→Silicone): ECE 0.070 (aim <= 0.05): **missed by 0.020**" in sec
+    assert ("A-to-C (Sim→Meat): d̄ at the other set's map threshold 4.50 mm (aim <= 3 mm): **missed by 1.50 mm**; "
+            "why: the other set's threshold marks 3,000 pixels against 1,000") in sec
+    assert "A-to-C (Sim→Meat): d̄ at calibrated 0.5 2.50 mm (aim <= 3 mm): met." in sec
+    diff = text.split("### Training recipe: calibration cross-fitted")[1].split("\n### ")[0]
+    assert "5 of 11 aim checks met, 6 missed" in diff and "want different Platt slopes" in diff

@@ -9,6 +9,8 @@ from functools import partial
 from pathlib import Path
 from types import SimpleNamespace
 
+import yaml
+
 from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
 from snakemake_interface_executor_plugins.settings import DeploymentMethod
@@ -81,6 +83,21 @@ RECIPE_REPORT_FILES = (
                                             "uncertainty_maps.pdf", "recipe_report.json")]
     if RECIPE_ABL["seeds"] else []
 )
+# The recipe_crossfit rule (recipe.smk) writes the calibration cross-fitted between the real sets, which the
+# results page reads. It joins the run where every ablated configuration's partner (conf/recipe_crossfit.yaml)
+# is ablated with the same switch rows; else the page says it was not produced.
+RECIPE_CROSSFIT_OUTPUTS = [f"{RECIPE_REPORT}/{name}" for name in (
+    "recipe_calibration_crossfit.csv", "recipe_calibration_crossfit.json", "reliability_crossfit.png",
+    "reliability_crossfit.pdf")]
+
+_XFIT_PARTNERS = yaml.safe_load(Path("conf/recipe_crossfit.yaml").read_text())["partners"]
+_XFIT_SWITCHED = RECIPE_ABL.get("switch_experiments") or RECIPE_ABL["experiments"]
+_XFIT_OK = bool(RECIPE_ABL["seeds"]) and all(
+    e in _XFIT_PARTNERS and (_XFIT_PARTNERS[e] is None or (
+        _XFIT_PARTNERS[e] in RECIPE_ABL["experiments"] and _XFIT_PARTNERS[e] != e
+        and (e not in _XFIT_SWITCHED or _XFIT_PARTNERS[e] in _XFIT_SWITCHED)))
+    for e in RECIPE_ABL["experiments"])
+RECIPE_CROSSFIT_FILES = RECIPE_CROSSFIT_OUTPUTS if _XFIT_OK else []
 
 
 def plain(*outputs):

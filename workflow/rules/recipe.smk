@@ -182,7 +182,8 @@ rule recipe_report:
 
 # Calibration and map threshold cross-fitted between the two real sets (docs/recipe.md "Cross-fitted calibration"):
 # from the stored runs (no retraining), each Sim-trained model calibrated on its own scores on the other real set.
-# Not part of `all`: `snakemake results/recipe/report/recipe_calibration_crossfit.csv` (CPU, about a minute).
+# CPU, about a minute. In the run (rule all, read by results_page) where RECIPE_CROSSFIT_FILES (common.smk) is set;
+# else on demand: `snakemake results/recipe/report/recipe_calibration_crossfit.csv`.
 if RECIPE_ABL["seeds"]:
 
     rule recipe_crossfit:
@@ -192,9 +193,7 @@ if RECIPE_ABL["seeds"]:
             data=list(dict.fromkeys(TRAIN_DATA[EXPERIMENTS[e].test_on] for e in RECIPE_ABL["experiments"])),  # the real sets
             conf=conf_files("recipe_crossfit") + conf_files("vessel_maps"),
         output:
-            [f"{RECIPE_REPORT}/{name}" for name in ("recipe_calibration_crossfit.csv",
-                                                    "recipe_calibration_crossfit.json", "reliability_crossfit.png",
-                                                    "reliability_crossfit.pdf")],
+            RECIPE_CROSSFIT_OUTPUTS,
         log:
             "results/logs/recipe_crossfit.log",
         benchmark:

@@ -20,6 +20,7 @@ rule results_page:
         silicone_check=rules.silicone_check.output.json,  # not read: the page comes last, timing every job
         twin_ablation=TWIN_ABLATION_FILES,  # common.smk; empty where the profile skips the ablation
         recipe=RECIPE_REPORT_FILES,  # common.smk; empty where the profile skips the recipe ablation
+        recipe_crossfit=RECIPE_CROSSFIT_FILES,  # common.smk; empty where the ablation lacks a partner (or is skipped)
         judge=JUDGE_FILES,  # common.smk; empty where the profile skips the downstream judge (issue 12)
         conf=conf_files("results_page"),
         explanations="conf/results_page/explanations.yaml",

@@ -6,6 +6,7 @@
 # in a later archive replaces an earlier one's (counted). Then the real test sets are made where missing (Snakemake,
 # CPU, ~1 min), and palpation.apps.recipe_report makes the table from the profile's train.recipe_ablation
 # (PROFILE, default paper): every row complete (a missing run is an error) unless PARTIAL="why" is given.
+# Without PARTIAL, palpation.apps.recipe_crossfit (rule recipe_crossfit) follows; its CSV, JSON, PNG are copied too.
 # With DOCS=1 (default) the report is copied to docs/results/{recipe_ablation,uncertainty}.csv and
 # docs/results/<profile>/recipe/report/ (PNGs colour-quantised), and for the paper profile docs/results.md is rebuilt by the results_page
 # app (its line 3, the run's provenance, kept from HEAD). Prints the table and the trajectory check (runs of
@@ -48,8 +49,27 @@ rep=results/recipe/report
 cat "$rep/recipe_ablation.csv"
 "$py" -c "import json; r = json.load(open('$rep/recipe_report.json')); print('rows', len(r['rows']), 'partial', r['partial'],
 'left out', len(r['left_out'])); [print('trajectory', k, v) for k, v in r.get('trajectory_checks', {}).items()]"
+# the calibration cross-fitted between the real sets (rule recipe_crossfit; the results page reads it): complete
+# tables only, as its rows need every seed of a row and of its partner
+crossfit=0
+if [ -z "${PARTIAL:-}" ]; then
+  "$py" -m palpation.apps.recipe_crossfit "profile=$profile" runs_root=results/recipe out_dir=$rep "${args[@]}" \
+    > results/recipe_merge_crossfit.log 2>&1 && crossfit=1 ||
+    { tail -3 results/recipe_merge_crossfit.log; echo "recipe_merge: recipe_crossfit failed, docs keep theirs" >&2; }
+else
+  echo "recipe_merge: partial table, recipe_crossfit not run (docs/results/$profile keeps its copy, if any)"
+fi
 [ "${DOCS:-1}" = 1 ] || exit 0
 mkdir -p "docs/results/$profile/recipe/report"
+if [ "$crossfit" = 1 ]; then
+  for f in recipe_calibration_crossfit.csv recipe_calibration_crossfit.json reliability_crossfit.png; do
+    cp "$rep/$f" "docs/results/$profile/recipe/report/$f"
+  done
+  "$py" -c "import sys; from PIL import Image; p = sys.argv[1]
+Image.open(p).convert('RGB').quantize(colors=256).save(p, optimize=True)" \
+    "docs/results/$profile/recipe/report/reliability_crossfit.png"
+  [ "$profile" != paper ] || cp "$rep/recipe_calibration_crossfit.csv" docs/results/
+fi
 for f in recipe_ablation.csv recipe_ablation.md recipe_report.json reliability.png uncertainty.csv uncertainty_maps.png; do
   cp "$rep/$f" "docs/results/$profile/recipe/report/$f"
 done

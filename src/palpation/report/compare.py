@@ -48,6 +48,11 @@ SOURCES = {
     "recipe_ablation": Source("recipe/report/recipe_ablation.csv",
                               ("config", "recipe", "switch_off", "seeds", "auroc_mean", "auroc_std", "ap_mean", "ap_std",
                                "pos_share_05", "ece", "d_bar_mm"), "recipe_report"),
+    "recipe_crossfit": Source("recipe/report/recipe_calibration_crossfit.csv",
+                              ("config", "recipe", "switch_off", "calibration", "fitted_on", "seeds", "ece", "ece_std",
+                               "pos_share_05", "brier", "ap", "d_bar_mm", "map_recall", "map_pred_px",
+                               "map_threshold_from", "d_bar_05_mm", "map_recall_05", "d_bar_05_seeds"),
+                              "recipe_crossfit"),
     "loop_slides": Source("loop_slides/loop_slides.csv", ("fold", "round", "effect_added", "mae_fit_px", "mae_heldout_px",
                                                          "vessel_ratio_sim", "vessel_ratio_real"), "slide_loop"),
     "twin_selection": Source("judge/twin_selection.csv",
@@ -66,6 +71,7 @@ TITLES = {
     "table4_maps": "Table 4, lower half: vessel maps",
     "twin_ablation": "Twin ablation: which twin made the Sim set",
     "recipe_ablation": "Training recipe: reference vs robust (issue 15)",
+    "recipe_crossfit": "Training recipe: calibration cross-fitted between the real sets (issue 15)",
     "twin_selection": "Twin on the task (issue 12)",
 }
 

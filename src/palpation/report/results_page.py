@@ -23,12 +23,12 @@ from palpation.report import page_training as training
 from palpation.report import page_twin as twin
 from palpation.report.compare import SOURCES, TITLES, Section, read_json, read_table
 from palpation.report.page_judge import twin_selection_section
-from palpation.report.page_recipe import recipe_ablation_section
+from palpation.report.page_recipe import CROSSFIT_FIGURE, recipe_ablation_section, recipe_crossfit_section
 from palpation.report.markdown import markdown, num
 from palpation.report.reproduction import BENCHMARKS, benchmark_jobs, per_rule, run_start, span_s
 
 ORDER = ("data", "calibration", "loop", "seed_sweep", "table3", "table4_markers", "table4_maps", "twin_ablation",
-         "recipe_ablation", "twin_selection")
+         "recipe_ablation", "recipe_crossfit", "twin_selection")
 FIGURES = (  # (caption, path under the results root; a glob lists every match)
     ("Fig. 4: fitted twin vs the photos", "calibration/fig4.png"),
     ("Fig. 4 at the paper's parameters", "calibration/fig4_paper.png"),
@@ -44,6 +44,7 @@ FIGURES = (  # (caption, path under the results root; a glob lists every match)
     ("Meat set", "data/meat/meat_overview.png"),
     ("Twin renders", "twin/render/markers.png"),
     ("Reliability of the test scores, reference vs robust recipe", "recipe/report/reliability.png"),
+    ("Reliability of the test scores, calibration cross-fitted between the real sets", CROSSFIT_FIGURE),
     ("Seed-ensemble vessel maps: mean, spread, unsure pixels, coverage-precision", "recipe/report/uncertainty_maps.png"),
     ("Twin on the task: real vs twin marker motion over one Silicone trial", "judge/slide_motion.png"),
 )
@@ -156,8 +157,8 @@ def timing(root: Path, rec: dict | None, built_commit: str) -> str:
                    + markdown(["rule", "s"], [[k, f"{v:.1f}"] for k, v in per]))
 
 
-def sections(root: Path, k: float = 2.0) -> dict[str, Section | None]:
-    """Every table of ORDER as a Section, or None where its main input is missing."""
+def sections(root: Path, k: float = 2.0, link=None) -> dict[str, Section | None]:
+    """Every table of ORDER as a Section, or None where its main input is missing; `link(rel)` links a figure."""
     t = {key: read_table(root, key) for key in SOURCES}
     loop_states = root / "loop" / "tables" / "per_state.csv"
     build = {
@@ -172,6 +173,10 @@ def sections(root: Path, k: float = 2.0) -> dict[str, Section | None]:
         "twin_ablation": lambda: training.twin_ablation_section(t["twin_ablation"], k),
         "recipe_ablation": lambda: recipe_ablation_section(t["recipe_ablation"],
                                                            read_json(root / "recipe" / "report" / "recipe_report.json")),
+        "recipe_crossfit": lambda: recipe_crossfit_section(
+            t["recipe_crossfit"], t["recipe_ablation"],
+            read_json(root / "recipe" / "report" / "recipe_calibration_crossfit.json"),
+            link(CROSSFIT_FIGURE) if link is not None and (root / CROSSFIT_FIGURE).exists() else None),
         "twin_selection": lambda: twin_selection_section(t["twin_selection"], t["loop_slides"]),
     }
     return {key: build[key]() if t[key] is not None else None for key in ORDER}
@@ -238,7 +243,7 @@ def build_page(root: str | Path, explanations: str | Path, folders_file: str | P
         return Path(os.path.relpath(root / rel, base)).as_posix()
 
     info = run_info(root, profile)
-    secs = sections(root, k)
+    secs = sections(root, k, link)
     expl = load_explanations(explanations)
     parts = [header(root, info, built_commit)]
     for key, sec in secs.items():

@@ -79,8 +79,8 @@ class IntegratorConfig:
     # (always streamed on the CPU: the same bits as "streamed"; resident.runs_resident)
     kernel: str = "streamed"
     # "auto" runs the streamed kernels for batches of fewer envs: a resident env is one block on one SM whatever the
-    # batch, so few envs leave most SMs idle (1: any batch; to be set from a measured crossover, docs/twin.md)
-    auto_min_envs: int = 1
+    # batch, so few envs leave most SMs idle. 40: the measured crossover of the layered kernels on an H100 (docs/twin.md)
+    auto_min_envs: int = 40
     # threads per env block of the resident kernel (<= 512: 106 registers a thread; compact <= 384, two blocks an SM).
     # 320 with compact: the fastest point of the H200 variant run, 12.63 s for 500 reference envs (docs/twin.md)
     block_dim: int = 320
