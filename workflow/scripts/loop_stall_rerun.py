@@ -56,7 +56,10 @@ def main() -> None:
         cfg = compose(config_name="loop", overrides=[o for o in ov if o.split("=")[0] not in DROP])
     loop = OmegaConf.to_object(cfg.loop).validate()
     twin = OmegaConf.to_object(cfg.twin)
-    row = json.loads((a.outdir / "selftest.json").read_text())["rows"][a.run]
+    rows = json.loads((a.outdir / "selftest.json").read_text())["rows"]
+    if not 0 <= a.run < len(rows):
+        raise SystemExit(f"{a.outdir}/selftest.json has runs 0..{len(rows) - 1}, not {a.run}")
+    row = rows[a.run]
     _, start = start_twin(twin, loop.shell_thickness_mm * 1e-3)
     mset = load_measured_set(a.measured)
     tw = loop_twin_config(nominal_projection(twin), loop.shell_thickness_mm * 1e-3)
