@@ -13,14 +13,13 @@ batch it runs in: the CPU kernels run env after env, each env's sums in its own 
   starts, each polish chain's base, the evaluation after a polish) is read back instead of re-run;
 * `workers` threads: Warp runs a CPU kernel on one core and replays a CPU graph without Python's lock,
   so the batches (each kind's envs cut in `workers` parts) run side by side. Building a twin and
-  capturing its graph go through Warp's process-wide capture state: one thread at a time (_WARP).
+  capturing its graph go through Warp's process-wide capture state: one thread at a time (CAPTURE_LOCK).
 """
 
 from __future__ import annotations
 
 import logging
 import os
-import threading
 import time
 from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
@@ -36,9 +35,9 @@ from palpation.twin.mesh import SensorMesh
 from palpation.twin.parameters import PARAMETERS
 from palpation.twin.runner import EnvRequest, ScheduledBatch, plan_requests
 from palpation.twin.trajectory import mount_offset, padded_schedule, with_mount
+from palpation.twin.warp_runtime import CAPTURE_LOCK as _WARP
 
 log = logging.getLogger(__name__)
-_WARP = threading.Lock()  # Warp's CPU graph capture is process-wide: one twin built and captured at a time
 CACHE_BYTES = 512 * 2**20  # final node positions kept for re-use (~5 kB an env coarse, ~41 kB reference)
 
 
