@@ -19,7 +19,6 @@ batch it runs in: the CPU kernels run env after env, each env's sums in its own 
 from __future__ import annotations
 
 import logging
-import os
 import time
 from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
@@ -35,7 +34,7 @@ from palpation.twin.mesh import SensorMesh
 from palpation.twin.parameters import PARAMETERS
 from palpation.twin.runner import EnvRequest, ScheduledBatch, plan_requests
 from palpation.twin.trajectory import mount_offset, padded_schedule, with_mount
-from palpation.twin.warp_runtime import CAPTURE_LOCK as _WARP
+from palpation.twin.warp_runtime import CAPTURE_LOCK as _WARP, usable_cores
 
 log = logging.getLogger(__name__)
 CACHE_BYTES = 512 * 2**20  # final node positions kept for re-use (~5 kB an env coarse, ~41 kB reference)
@@ -83,7 +82,7 @@ class LoopSimulator:
         self.device = device or cfg.device
         cpu = str(self.device).startswith("cpu")
         self.split = cpu if split_by_kind is None else bool(split_by_kind)
-        self.workers = max(1, int(workers if workers is not None else len(os.sched_getaffinity(0)) if cpu else 1))
+        self.workers = max(1, int(workers if workers is not None else usable_cores() if cpu else 1))
         self.max_frames = max_frames
         self._bindings: dict[tuple, CameraBinding] = {}
         self._lengths: dict[tuple, int] = {}  # frames per (kind, depth, angle, heading): a batch's cost

@@ -30,7 +30,7 @@ from palpation.twin.parameters import by_env_key, per_env_keys
 from palpation.twin.simulator import BatchedTwin
 from palpation.twin.trajectory import (Trajectory, mount_offset, padded_schedule, plan_trajectories, waypoints,
                                        with_mount)
-from palpation.twin.warp_runtime import CAPTURE_LOCK, init_warp, resolve_device
+from palpation.twin.warp_runtime import CAPTURE_LOCK, init_warp, resolve_device, usable_cores
 
 log = logging.getLogger(__name__)
 READ_FAILED_EVERY = 20  # frames between host reads of the failure flags (the reference's interval)
@@ -275,7 +275,7 @@ def run_batches(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest], b
     env's end and every READ_FAILED_EVERY frames, and so a failed env's detected_at_frame stay), and only
     when every request has a name (else named by its place in the batch)."""
     if workers is None:
-        workers = len(os.sched_getaffinity(0)) if resolve_device(device or cfg.device).is_cpu else 1
+        workers = usable_cores() if resolve_device(device or cfg.device).is_cpu else 1
     if any(not r.name for r in requests):
         workers = 1
     parts = []

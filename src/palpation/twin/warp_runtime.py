@@ -22,6 +22,11 @@ log = logging.getLogger(__name__)
 # graph natively, without Python's lock, one core per thread)
 CAPTURE_LOCK = threading.Lock()
 
+
+def usable_cores() -> int:
+    """Cores this process may run on (its affinity where the OS has one): the CPU twin's threads."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
 CPU_ONLY_WARNING = b"Could not find or load the NVIDIA CUDA driver"
 
 
