@@ -90,6 +90,9 @@ class LoopSimulator:
         self._cache_room, self._cache_used = int(cache_bytes), 0
         self.envs_simulated = 0  # distinct physics simulated so far (for the budget log)
         self.cache_hits = 0  # distinct physics read back from the cache instead
+        # env-frames simulated, and their span: per call the busiest worker's share (parts handed out longest
+        # first to the least loaded), i.e. the twin's wall time in env-frames when `workers` cores are free
+        self.env_frames = self.span_frames = self.cached_frames = 0  # cached: the env-frames the cache saved
         self.calls, self.sim_s = 0, 0.0  # twin calls (sequential batches) and the time spent in them
 
     def binding(self, camera: Mapping[str, float]) -> CameraBinding:
@@ -121,6 +124,7 @@ class LoopSimulator:
             self._cache.move_to_end(key)
         todo = [u for u in unique if u not in results]
         self.cache_hits += len(results)
+        self.cached_frames += sum(self._frames(key) for key in results)
         self.envs_simulated += len(todo)
         results.update(self._run_all(todo))
         out = np.full((len(jobs), len(self.template), 2), np.nan)
@@ -144,7 +148,13 @@ class LoopSimulator:
         parts = [part for g in groups if g for part in np.array_split(np.arange(len(g)), min(self.workers, len(g)))
                  for part in [[g[i] for i in part]]]
         work = [len(p) * self._frames(p[0]) for p in parts]  # env-frames: a part's cost on a CPU
-        parts = [parts[i] for i in sorted(range(len(parts)), key=lambda i: -work[i])]
+        order = sorted(range(len(parts)), key=lambda i: -work[i])
+        parts = [parts[i] for i in order]
+        load = [0] * self.workers
+        for i in order:
+            load[load.index(min(load))] += work[i]
+        self.env_frames += sum(work)
+        self.span_frames += max(load)
         if self.workers > 1 and len(parts) > 1:
             with ThreadPoolExecutor(self.workers) as pool:
                 runs = list(pool.map(self._run, parts))
