@@ -120,8 +120,8 @@ def test_simulate_fails_when_every_trajectory_diverged(tmp_path, monkeypatch, fa
 
     write_outputs(tmp_path, [record("trajectory_0000")], [])  # the previous, good run
     monkeypatch.setattr(simulate.SensorMesh, "load", staticmethod(lambda path: type("M", (), {"resolution": "x"})))
-    monkeypatch.setattr(simulate, "run_batch", lambda mesh, twin, reqs, **kw: BatchResult(
-        records=[], failed=[failed(r.name) for r in reqs], frames=0, wall_s=0.0))
+    monkeypatch.setattr(simulate, "run_batches", lambda mesh, twin, reqs, batch_size, **kw: [BatchResult(
+        records=[], failed=[failed(r.name) for r in reqs], frames=0, wall_s=0.0)])
     cfg = OmegaConf.create({"twin": OmegaConf.structured(TwinConfig), "mesh": "m", "set": "randomised", "seed": 1,
                             "n_pairs": 1, "heading_offset_deg": 0.0, "batch_size": 2, "progress": False,
                             "max_frames": None, "track": False, "dataset": {"recentre_k_n": False},

@@ -10,7 +10,7 @@ from hydra import compose, initialize_config_dir
 from palpation.paths import REPO_ROOT
 from palpation.twin.config import TwinConfig
 from palpation.twin.output import load_trajectory, write_outputs
-from palpation.twin.runner import EnvRequest, run_batch, simulate_states
+from palpation.twin.runner import EnvRequest, run_batch, run_batches, simulate_states
 from palpation.twin.trajectory import plan_trajectory
 
 ABSURD_E = 1e11  # Pa: far past the explicit step's stability limit, NaN within a few frames
@@ -63,11 +63,30 @@ def test_simulate_states_last_frame_and_failures(mesh, binding):
         simulate_states(mesh, TwinConfig(), [("press", {"young": 1.0})], binding=binding)
 
 
-def compose_simulate(mesh_path: Path, out_dir: Path):
+def test_batches_in_threads_give_the_same_records(mesh):
+    slides = [EnvRequest("slide", heading_offset_deg=h, k_n=k, name=f"s{i}")
+              for i, (h, k) in enumerate([(5.0, 2e3), (-3.0, 4e3), (0.0, 3e3), (8.0, 5e3)])]
+    slides.insert(2, EnvRequest("slide", E=ABSURD_E, name="absurd"))
+    mixed = [EnvRequest("press", vessel=True, name="p"), EnvRequest("twist_x", name="t")]
+    one = run_batches(mesh, TwinConfig(), slides + mixed, 500, device="cpu", progress=False, max_frames=12,
+                      workers=1)
+    many = run_batches(mesh, TwinConfig(), slides + mixed, 5, device="cpu", progress=False, max_frames=12,
+                       workers=3)
+    assert len(one) == 1 and [len(r.failed_mask) for r in many] == [2, 2, 1, 2]  # the mixed batch is not cut
+    recs = [r for res in many for r in res.records]
+    assert [r.name for r in recs] == [r.name for r in one[0].records] == ["s0", "s1", "s2", "s3", "p", "t"]
+    assert [(f.name, f.detected_at_frame) for res in many for f in res.failed] == \
+        [(f.name, f.detected_at_frame) for f in one[0].failed] and one[0].failed[0].name == "absurd"
+    for a, b in zip(one[0].records, recs):
+        for key in ("markers", "labels", "centreline_px", "contact", "T_BA", "frame_index"):
+            assert getattr(a, key).tobytes() == getattr(b, key).tobytes(), f"{a.name}:{key}"
+
+
+def compose_simulate(mesh_path: Path, out_dir: Path, workers: int = 0):
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
         return compose(config_name="simulate", overrides=[
             "set=randomised", "n_pairs=1", "max_frames=84", "progress=false", "track=false",
-            f"mesh={mesh_path}", f"out.dir={out_dir}"])
+            f"mesh={mesh_path}", f"out.dir={out_dir}", f"workers={workers}"])
 
 
 def test_app_same_seed_is_bit_identical(tmp_path, mesh):
@@ -76,8 +95,8 @@ def test_app_same_seed_is_bit_identical(tmp_path, mesh):
     mesh_path = tmp_path / "mesh.npz"
     mesh.save(mesh_path)
     outs = []
-    for rep in ("a", "b"):
-        summary = run(compose_simulate(mesh_path, tmp_path / rep))
+    for rep, workers in (("a", 1), ("b", 2)):  # and the threads (twin.runner.run_batches) change no bit
+        summary = run(compose_simulate(mesh_path, tmp_path / rep, workers))
         assert summary["n_files"] == 2 and summary["n_failed"] == 0
         outs.append(tmp_path / rep)
     for name in ("trajectory_0000.npz", "trajectory_0001.npz"):

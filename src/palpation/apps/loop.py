@@ -91,9 +91,12 @@ def run(cfg: DictConfig) -> dict:
     else:
         result = run_self(cfg, loop, tw, mset, source, sim, tkey, out, start_params)
     result.update({"wall_s": time.perf_counter() - start, "envs_simulated": sim.envs_simulated,
-                   "twin_calls": sim.calls, "twin_s": sim.sim_s})
-    log.info("loop %s done in %.0f s (%d distinct envs simulated in %d twin calls, %.0f s in the twin)", cfg.mode,
-             result["wall_s"], sim.envs_simulated, sim.calls, sim.sim_s)
+                   "envs_cached": sim.cache_hits, "twin_calls": sim.calls, "twin_s": sim.sim_s,
+                   "env_frames": sim.env_frames, "span_frames": sim.span_frames, "cached_frames": sim.cached_frames})
+    log.info("loop %s done in %.0f s (%d distinct envs simulated, %d read back from the cache, in %d twin calls "
+             "with %d worker(s), %.0f s in the twin; %d env-frames, %d on the busiest worker, %d saved by the cache)",
+             cfg.mode, result["wall_s"], sim.envs_simulated, sim.cache_hits, sim.calls, sim.workers, sim.sim_s,
+             sim.env_frames, sim.span_frames, sim.cached_frames)
     return result
 
 

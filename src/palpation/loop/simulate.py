@@ -6,12 +6,22 @@ each distinct physics once. Per env the mount offset composes the planned schedu
 never sees it), and the markers are projected in numpy from the final node positions with a binding
 made through that env's camera (markers.bind_markers_through). On a CPU, kinds run as separate
 batches: every env costs the longest env's frames.
+
+Two things make the CPU loop cheaper without changing a byte (an env's result does not depend on the
+batch it runs in: the CPU kernels run env after env, each env's sums in its own order):
+* a physics cache: an env already simulated (same state, same physics parameters; the search's warm
+  starts, each polish chain's base, the evaluation after a polish) is read back instead of re-run;
+* `workers` threads: Warp runs a CPU kernel on one core and replays a CPU graph without Python's lock,
+  so the batches (each kind's envs cut in `workers` parts) run side by side. Building a twin and
+  capturing its graph go through Warp's process-wide capture state: one thread at a time (CAPTURE_LOCK).
 """
 
 from __future__ import annotations
 
 import logging
 import time
+from collections import OrderedDict
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Mapping
 
@@ -24,8 +34,10 @@ from palpation.twin.mesh import SensorMesh
 from palpation.twin.parameters import PARAMETERS
 from palpation.twin.runner import EnvRequest, ScheduledBatch, plan_requests
 from palpation.twin.trajectory import mount_offset, padded_schedule, with_mount
+from palpation.twin.warp_runtime import CAPTURE_LOCK as _WARP, usable_cores
 
 log = logging.getLogger(__name__)
+CACHE_BYTES = 512 * 2**20  # final node positions kept for re-use (~5 kB an env coarse, ~41 kB reference)
 
 
 @dataclass(frozen=True)
@@ -57,14 +69,30 @@ def loop_twin_config(cfg: TwinConfig, shell_thickness_m: float) -> TwinConfig:
 
 
 class LoopSimulator:
+    """`simulate(jobs)`: final-frame markers of (state, loop parameters) jobs.
+
+    `workers`: threads running batches side by side (None: the usable cores on a CPU, 1 on CUDA, where
+    one batch fills the device); `cache_bytes`: room for final node positions of simulated envs (0: off).
+    Neither changes a result (tests/loop/test_simulate.py)."""
+
     def __init__(self, mesh: SensorMesh, cfg: TwinConfig, template_px: np.ndarray, device: str | None = None,
-                 split_by_kind: bool | None = None, max_frames: int | None = None):
+                 split_by_kind: bool | None = None, max_frames: int | None = None, workers: int | None = None,
+                 cache_bytes: int = CACHE_BYTES):
         self.mesh, self.cfg, self.template = mesh, cfg, np.asarray(template_px, np.float64)
         self.device = device or cfg.device
-        self.split = str(self.device).startswith("cpu") if split_by_kind is None else bool(split_by_kind)
+        cpu = str(self.device).startswith("cpu")
+        self.split = cpu if split_by_kind is None else bool(split_by_kind)
+        self.workers = max(1, int(workers if workers is not None else usable_cores() if cpu else 1))
         self.max_frames = max_frames
         self._bindings: dict[tuple, CameraBinding] = {}
+        self._lengths: dict[tuple, int] = {}  # frames per (kind, depth, angle, heading): a batch's cost
+        self._cache: OrderedDict[tuple, tuple] = OrderedDict()  # physics key -> (nodes, pose, failed), LRU
+        self._cache_room, self._cache_used = int(cache_bytes), 0
         self.envs_simulated = 0  # distinct physics simulated so far (for the budget log)
+        self.cache_hits = 0  # distinct physics read back from the cache instead
+        # env-frames simulated, and their span: per call the busiest worker's share (parts handed out longest
+        # first to the least loaded), i.e. the twin's wall time in env-frames when `workers` cores are free
+        self.env_frames = self.span_frames = self.cached_frames = 0  # cached: the env-frames the cache saved
         self.calls, self.sim_s = 0, 0.0  # twin calls (sequential batches) and the time spent in them
 
     def binding(self, camera: Mapping[str, float]) -> CameraBinding:
@@ -91,25 +119,71 @@ class LoopSimulator:
         physics = [(s.kind, s.depth_mm, s.angle_deg, s.heading_offset_deg, tuple(sorted(env.items())),
                     tuple(sorted(mount.items()))) for (s, _), (env, _, mount, _) in zip(jobs, parts)]
         unique = list(dict.fromkeys(physics))
-        groups = [unique] if not self.split else [[u for u in unique if u[0] == k]
-                                                  for k in dict.fromkeys(u[0] for u in unique)]
-        nodes, poses, failed = {}, {}, {}
-        for group in groups:
-            n_A, T, bad = self._run(group)
-            for i, key in enumerate(group):
-                nodes[key], poses[key], failed[key] = n_A[i], T[i], bad[i]
-        self.envs_simulated += len(unique)
+        results = {key: self._cache[key] for key in unique if key in self._cache}
+        for key in results:
+            self._cache.move_to_end(key)
+        todo = [u for u in unique if u not in results]
+        self.cache_hits += len(results)
+        self.cached_frames += sum(self._frames(key) for key in results)
+        self.envs_simulated += len(todo)
+        results.update(self._run_all(todo))
         out = np.full((len(jobs), len(self.template), 2), np.nan)
         bad_out = np.zeros(len(jobs), bool)
         for j, (key, (_, camera, _, markers)) in enumerate(zip(physics, parts)):
-            if failed[key]:
+            nodes, pose, failed = results[key]
+            if failed:
                 bad_out[j] = True
                 continue
             through = self.binding(camera)
-            out[j] = through.markers(project_markers_np(through.binding, nodes[key][None], poses[key][None])[0])
+            out[j] = through.markers(project_markers_np(through.binding, nodes[None], pose[None])[0])
             # anchor: move the (nominal) bound rest onto the template, as twin.config.MarkerConfig
             out[j] += markers.get("anchor", 0.0) * (self.template - through.anchor_px)
         return out, bad_out
+
+    def _run_all(self, todo: list[tuple]) -> dict[tuple, tuple]:
+        """Simulate the distinct physics `todo` (per kind on a CPU, each cut in `workers` parts run side by
+        side, the longest first) and keep them in the cache; returns {key: (nodes, pose, failed)}."""
+        groups = [todo] if not self.split else [[u for u in todo if u[0] == k]
+                                                for k in dict.fromkeys(u[0] for u in todo)]
+        parts = [part for g in groups if g for part in np.array_split(np.arange(len(g)), min(self.workers, len(g)))
+                 for part in [[g[i] for i in part]]]
+        work = [len(p) * self._frames(p[0]) for p in parts]  # env-frames: a part's cost on a CPU
+        order = sorted(range(len(parts)), key=lambda i: -work[i])
+        parts = [parts[i] for i in order]
+        load = [0] * self.workers
+        for i in order:
+            load[load.index(min(load))] += work[i]
+        self.env_frames += sum(work)
+        self.span_frames += max(load)
+        if self.workers > 1 and len(parts) > 1:
+            with ThreadPoolExecutor(self.workers) as pool:
+                runs = list(pool.map(self._run, parts))
+        else:
+            runs = [self._run(p) for p in parts]
+        out = {}
+        for part, (n_A, T, bad) in zip(parts, runs):
+            for i, key in enumerate(part):
+                out[key] = (n_A[i].copy(), T[i].copy(), bool(bad[i]))  # not views of the batch
+                self._remember(key, out[key])
+        return out
+
+    def _frames(self, key: tuple) -> int:
+        """Frames of one env's schedule (set by its kind and geometry; planned once)."""
+        kind, d, a, h, params, _ = key
+        if (kind, d, a, h) not in self._lengths:
+            req = EnvRequest(kind, h, depth_mm=d, angle_deg=a, record="last", **dict(params)).resolved(self.cfg)
+            self._lengths[kind, d, a, h] = plan_requests(self.mesh, self.cfg, [req], self.max_frames)[0].n_frames
+        return self._lengths[kind, d, a, h]
+
+    def _remember(self, key: tuple, value: tuple) -> None:
+        size = value[0].nbytes + value[1].nbytes
+        if size > self._cache_room:
+            return
+        self._cache[key] = value
+        self._cache_used += size
+        while self._cache_used > self._cache_room:  # the least recently used go first
+            _, (n, T, _) = self._cache.popitem(last=False)
+            self._cache_used -= n.nbytes + T.nbytes
 
     def _run(self, group: list[tuple]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Simulate distinct physics to their last frame: final nodes (n, N, 3), poses, failed flags."""
@@ -119,14 +193,21 @@ class LoopSimulator:
         trajs = [with_mount(t, mount_offset(**{"dz_m" if k == "dz" else k: v for k, v in mount}))
                  if mount else t for t, (*_, mount) in zip(trajs, group)]
         schedule, lengths = padded_schedule(trajs)
-        batch = ScheduledBatch(self.mesh, self.cfg, reqs, trajs, schedule, self.device)
         nodes = np.full((len(group), self.mesh.n_nodes, 3), np.nan, np.float32)
         failed = np.zeros(len(group), bool)
         ends = {int(e) - 1 for e in lengths}
-        for f in batch.frames():
+        with _WARP:  # build, upload and capture (the first frame's step) one twin at a time
+            batch = ScheduledBatch(self.mesh, self.cfg, reqs, trajs, schedule, self.device)
+            frames = batch.frames()
+            f = next(frames)
+        while f is not None:  # the graph replays outside the lock: Warp releases Python's lock there
             if f in ends:  # read only where some env ends; the failure flag is sticky
-                done = lengths - 1 == f
-                nodes[done] = batch.sim.positions_world()[done]
-                failed[done] = batch.sim.failed()[done]
+                with _WARP:
+                    done = lengths - 1 == f
+                    nodes[done] = batch.sim.positions_world()[done]
+                    failed[done] = batch.sim.failed()[done]
+            f = next(frames, None)
+        with _WARP:
+            del frames, batch  # Warp arrays freed outside any other thread's capture
         T_last = np.stack([t.T_BA[-1] for t in trajs])
         return nodes, T_last, failed | ~np.all(np.isfinite(nodes), axis=(1, 2))

@@ -30,7 +30,7 @@ from palpation.twin.parameters import by_env_key, per_env_keys
 from palpation.twin.simulator import BatchedTwin
 from palpation.twin.trajectory import (Trajectory, mount_offset, padded_schedule, plan_trajectories, waypoints,
                                        with_mount)
-from palpation.twin.warp_runtime import init_warp
+from palpation.twin.warp_runtime import CAPTURE_LOCK, init_warp, resolve_device, usable_cores
 
 log = logging.getLogger(__name__)
 READ_FAILED_EVERY = 20  # frames between host reads of the failure flags (the reference's interval)
@@ -193,30 +193,42 @@ def run_batch(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest],
     n, n_frames = len(reqs), len(schedule)
 
     start = time.perf_counter()
-    batch = ScheduledBatch(mesh, cfg, reqs, trajs, schedule, device)
-    sim = batch.sim
-    proj = MarkerProjector(binding, schedule, mesh.n_nodes, first, end, device=device)
-    contact_dev = wp.zeros((n_frames, n), dtype=wp.int32, device=device)  # written on device, read once
+    with CAPTURE_LOCK:  # build, upload and capture (the first frame) one twin at a time (warp_runtime)
+        batch = ScheduledBatch(mesh, cfg, reqs, trajs, schedule, device)
+        sim = batch.sim
+        proj = MarkerProjector(binding, schedule, mesh.n_nodes, first, end, device=device)
+        contact_dev = wp.zeros((n_frames, n), dtype=wp.int32, device=device)  # written on device, read once
 
-    def per_frame(frame_index, offset):  # captured with the frame: flags and markers, no host work
-        wp.launch(record_contact_flags, dim=n, device=device, inputs=[sim.contact_flag, frame_index, offset],
-                  outputs=[contact_dev])
-        proj.extract_at(sim.x, frame_index, offset)
+        def per_frame(frame_index, offset):  # captured with the frame: flags and markers, no host work
+            wp.launch(record_contact_flags, dim=n, device=device, inputs=[sim.contact_flag, frame_index, offset],
+                      outputs=[contact_dev])
+            proj.extract_at(sim.x, frame_index, offset)
 
+        frames = batch.frames(per_frame, progress)
+        f = next(frames)
     failed_at = np.full(n, -1)
     # the simulator's failure flag is sticky, so reading it sparsely (plus at each env's last frame,
     # to tell a failure inside an env's own frames from one after it finished) loses nothing
     checks = set(range(READ_FAILED_EVERY - 1, n_frames, READ_FAILED_EVERY)) | set((lengths - 1).tolist())
     checked_to = 0  # frames [0, checked_to) are covered by earlier checks
-    for f in batch.frames(per_frame, progress):
+    while True:  # the graph replays outside the lock
         if f in checks:
+            with CAPTURE_LOCK:
+                failed_now = sim.failed()
             # blame only envs still inside their own frames since the last check
-            bad = sim.failed() & (failed_at < 0) & (lengths > checked_to)
+            bad = failed_now & (failed_at < 0) & (lengths > checked_to)
             failed_at[bad] = f
             checked_to = f + 1
             if np.all((failed_at >= 0) | (lengths <= checked_to)):
                 break  # every env has either failed or finished
-    markers, centre = proj.results()
+        nxt = next(frames, None)
+        if nxt is None:
+            break
+        f = nxt
+    with CAPTURE_LOCK:
+        markers, centre = proj.results()
+        contact = contact_dev.numpy().astype(bool)
+        del frames, per_frame, proj, contact_dev, sim, batch  # Warp arrays freed outside another thread's capture
     if through is not None:  # the projector ran the nominal camera: map into the true image
         markers = through.markers(markers).astype(np.float32)
         centre = image.apply(centre).astype(np.float32)
@@ -224,7 +236,6 @@ def run_batch(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest],
         shift = cfg.markers.anchor * (binding.template_px - binding.rest_px)
         markers = (markers + shift).astype(np.float32)
         binding = replace(binding, rest_px=binding.rest_px + shift)
-    contact = contact_dev.numpy().astype(bool)
     wall = time.perf_counter() - start
 
     def labels(i):  # numpy releases the GIL: envs in parallel threads (~10 ms per recorded slide each)
@@ -252,6 +263,35 @@ def run_batch(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest],
             labels=env_labels[i], contact=k, T_BA=schedule[frames, i], frame_index=frames,
             centreline_A=line_A, rest_markers_px=binding.rest_px.astype(np.float32)))
     return BatchResult(records=records, failed=failed, frames=f + 1, wall_s=wall, failed_mask=failed_at >= 0)
+
+
+def run_batches(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest], batch_size: int,
+                device: str | None = None, progress: bool = True, max_frames: int | None = None,
+                workers: int | None = None) -> list[BatchResult]:
+    """`requests` in batches of at most `batch_size`, each cut into `workers` parts that run side by side
+    in threads (None: the usable cores on a CPU, where Warp runs a kernel on one core; 1 on CUDA). An env's
+    record does not depend on the batch it ran in, so the records (in request order) are the same for any
+    cut. Only a batch of one kind and geometry is cut (the same frames for all: the failure checks, at each
+    env's end and every READ_FAILED_EVERY frames, and so a failed env's detected_at_frame stay), and only
+    when every request has a name (else named by its place in the batch)."""
+    if workers is None:
+        workers = usable_cores() if resolve_device(device or cfg.device).is_cpu else 1
+    if any(not r.name for r in requests):
+        workers = 1
+    parts = []
+    for lo in range(0, len(requests), batch_size):
+        chunk = requests[lo: lo + batch_size]
+        same = len({(r.kind, r.depth_mm, r.angle_deg) for r in chunk}) == 1
+        cut = min(workers, len(chunk)) if same else 1
+        parts += [[chunk[i] for i in ix] for ix in np.array_split(np.arange(len(chunk)), cut)]
+
+    def one(part):
+        return run_batch(mesh, cfg, part, device=device, progress=progress and len(parts) == 1, max_frames=max_frames)
+
+    if workers > 1 and len(parts) > 1:
+        with ThreadPoolExecutor(workers) as pool:
+            return list(pool.map(one, parts))
+    return [one(p) for p in parts]
 
 
 def simulate_states(mesh: SensorMesh, cfg: TwinConfig, requests: list[tuple[str, dict]],

@@ -12,10 +12,20 @@ import logging
 import os
 import sys
 import tempfile
+import threading
 
 import warp as wp
 
 log = logging.getLogger(__name__)
+# Warp's CPU graph capture is process-wide state: threads that each run a twin (loop.simulate, apps.simulate)
+# build, capture and read their twins under this lock and replay their graphs outside it (Warp replays a CPU
+# graph natively, without Python's lock, one core per thread)
+CAPTURE_LOCK = threading.Lock()
+
+
+def usable_cores() -> int:
+    """Cores this process may run on (its affinity where the OS has one): the CPU twin's threads."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 CPU_ONLY_WARNING = b"Could not find or load the NVIDIA CUDA driver"
 
