@@ -20,7 +20,8 @@ def test_the_scripts_overrides_compose_and_validate():
     values = {"twin.device": "cuda", "loop.selftest.runs_per_case": "5", "loop.split_by_kind": "false",
               "loop.search.ask_workers": "16", "loop.final_refit_starts": "3",
               "loop.compete": "true", "loop.final_refit_iters": "10", "loop.nested_starts": "true",
-              "loop.null_converge": "true", "loop.camera_grid_converged": "true", "loop.projected_null": "true"}
+              "loop.null_converge": "true", "loop.camera_grid_converged": "true", "loop.projected_null": "true",
+              "loop.final_refit_regrid": "2", "loop.final_refit_off_starts": "true"}
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="loop", overrides=["mode=selftest", *(f"{k}={values[k]}" for k in keys)])
     loop = OmegaConf.to_object(cfg.loop).validate()
@@ -31,6 +32,7 @@ def test_the_scripts_overrides_compose_and_validate():
     # base's null try to convergence, the converged camera grid and the projected null (quick keeps them off for make
     # reproduce); the search-time rotation grid stays opt-in (measured worse on the 60 runs: docs/loop.md)
     assert loop.null_converge and loop.camera_grid_converged and loop.projected_null and not loop.camera_grid_rotation
+    assert loop.final_refit_regrid == 2 and loop.final_refit_off_starts  # the final passes, adopted (quick: off)
 
 
 def test_loop_app_imports_without_gmsh():

@@ -36,6 +36,7 @@ log = logging.getLogger(__name__)
 COLUMNS = ("run", "effects_injected", "strength", "effects_named", "mae_before_px", "mae_after_px",
            "excess_ratio")
 UNLISTED_PREFIX = "unlisted:"
+MAX_REDRAWS = 3  # a run whose injected twin diverges is drawn again this many times (simulate_injections)
 DISTORTION_RADIUS_PX = 400.0  # ~ the image circle's radius
 DISTORTION_K = 0.02  # barrel coefficient per nominal step: 8 px at r = 400 px per step
 DEFECT_MARKERS = 7  # a patch: a marker and its 6 neighbours
@@ -71,6 +72,7 @@ class Injection:
     betas: dict[str, float]  # nominal steps per dof of the in-list effects
     base_effects: list[str]
     params: dict[str, float]  # the twin that made the data
+    redrawn: int = 0  # draws after the first (its twin diverged; simulate_injections)
 
     @property
     def label(self) -> str:
@@ -105,40 +107,77 @@ def base_for(effects, cfg: LoopConfig, base: Mapping[str, float]) -> tuple[list[
 
 
 def draw_injections(cfg: LoopConfig, base: Mapping[str, float], rng: np.random.Generator) -> list[Injection]:
-    st, steps, out = cfg.selftest, dict(cfg.steps), []
-    span = st.strength_high - st.strength_low
-    for case in st.cases:
-        inl, unl = parse_case(case, st.base_effects)
-        for r in range(st.runs_per_case):
-            on, params = base_for(inl, cfg, base)
-            strengths, betas = {}, {}
-            for e in [*inl, *unl]:
-                # stratified: run r draws from the r-th of runs_per_case equal slices of [low, high]
-                strengths[e] = float(st.strength_low + span * (r + rng.uniform()) / st.runs_per_case)
-            for e in inl:
-                dofs = EFFECTS[e].dofs
-                u = rng.normal(size=len(dofs))
-                # "switched on": a one-dof effect grows; a multi-dof one (camera, mount) goes any way
-                u = np.where([d.nonneg or len(dofs) == 1 for d in dofs], np.abs(u), u) / np.linalg.norm(u)
-                for d, ui in zip(dofs, u):
-                    betas[f"{e}.{d.name}"] = float(strengths[e] * ui)
-                    params = move(params, d, betas[f"{e}.{d.name}"], steps)
-            out.append(Injection(len(out), inl, unl, strengths, betas, on, params))
+    out = []
+    for case in cfg.selftest.cases:
+        inl, unl = parse_case(case, cfg.selftest.base_effects)
+        for r in range(cfg.selftest.runs_per_case):
+            out.append(_draw(cfg, base, len(out), r, inl, unl, rng))
     return out
 
 
-def make_sets(injections: list[Injection], states: list[Target], simulate, noise_px: float,
+def _draw(cfg: LoopConfig, base: Mapping[str, float], run: int, r: int, inl: list[str], unl: list[str],
+          rng: np.random.Generator) -> Injection:
+    """Run `run` (the r-th of its case): a strength per effect from the r-th of runs_per_case equal slices of
+    [low, high] (stratified), then a random direction over each in-list effect's dofs."""
+    st, steps = cfg.selftest, dict(cfg.steps)
+    span = st.strength_high - st.strength_low
+    on, params = base_for(inl, cfg, base)
+    strengths, betas = {}, {}
+    for e in [*inl, *unl]:
+        strengths[e] = float(st.strength_low + span * (r + rng.uniform()) / st.runs_per_case)
+    for e in inl:
+        dofs = EFFECTS[e].dofs
+        u = rng.normal(size=len(dofs))
+        # "switched on": a one-dof effect grows; a multi-dof one (camera, mount) goes any way
+        u = np.where([d.nonneg or len(dofs) == 1 for d in dofs], np.abs(u), u) / np.linalg.norm(u)
+        for d, ui in zip(dofs, u):
+            betas[f"{e}.{d.name}"] = float(strengths[e] * ui)
+            params = move(params, d, betas[f"{e}.{d.name}"], steps)
+    return Injection(run, inl, unl, strengths, betas, on, params)
+
+
+def redraw(inj: Injection, cfg: LoopConfig, base: Mapping[str, float], attempt: int) -> Injection:
+    """A run whose injected twin diverged, drawn again in its own strength slice from its own stream (seed, run,
+    attempt): no other run's draws move, and remake_set gets the same run back."""
+    r = inj.run % cfg.selftest.runs_per_case
+    new = _draw(cfg, base, inj.run, r, inj.effects, inj.unlisted,
+                np.random.default_rng([cfg.selftest.seed, inj.run, attempt]))
+    new.redrawn = attempt
+    return new
+
+
+def simulate_injections(injections: list[Injection], states: list[Target], simulate, cfg: LoopConfig,
+                        base: Mapping[str, float]) -> np.ndarray:
+    """Every injected twin at `states` (one batch): markers (runs, states, 127, 2). Strong draws can leave the
+    twin's stable range (viscous near its top strength diverges on four of seeds 3-7): such a run is redrawn up to
+    MAX_REDRAWS times (injections is updated in place, the log says which), else the error stands."""
+    n = len(states)
+    markers, failed = simulate([(t.state, inj.params) for inj in injections for t in states])
+    markers, failed = np.array(markers).reshape(len(injections), n, -1, 2), np.asarray(failed).reshape(-1, n)
+    for attempt in range(1, MAX_REDRAWS + 1):
+        bad = np.flatnonzero(failed.any(axis=1))
+        if not len(bad):
+            break
+        log.warning("self-test: the twin diverged while making run(s) %s; drawn again (attempt %d)",
+                    [injections[i].run for i in bad], attempt)
+        for i in bad:
+            injections[i] = redraw(injections[i], cfg, base, attempt)
+        again, again_failed = simulate([(t.state, injections[i].params) for i in bad for t in states])
+        markers[bad] = np.asarray(again).reshape(len(bad), n, -1, 2)
+        failed[bad] = np.asarray(again_failed).reshape(-1, n)
+    if failed.any():
+        raise ValueError(f"self-test: the twin diverged while making run(s) "
+                         f"{[injections[i].run for i in np.flatnonzero(failed.any(axis=1))]} after {MAX_REDRAWS} "
+                         "redraws; lower the strengths (loop.selftest.strength_high) or the nominal steps (loop.steps)")
+    return markers
+
+
+def make_sets(injections: list[Injection], markers: np.ndarray, states: list[Target], noise_px: float,
               rng: np.random.Generator, out_dir: Path, geometry: Mapping[str, MeasuredState],
               rest_px: np.ndarray) -> list[Path]:
-    """Simulate every injected twin at `states` (one batch), apply out-of-list effects, add noise, save."""
-    jobs = [(t.state, inj.params) for inj in injections for t in states]
-    markers, failed = simulate(jobs)
-    if failed.any():
-        bad = sorted({injections[i // len(states)].run for i in np.flatnonzero(failed)})
-        raise ValueError(f"self-test: the twin diverged while making run(s) {bad}; lower the strengths "
-                         "(loop.selftest.strength_high) or the nominal steps (loop.steps)")
+    """Each run's simulated markers (simulate_injections) -> out-of-list effects, noise -> a measured set on disk."""
     paths = []
-    for inj, block in zip(injections, markers.reshape(len(injections), len(states), -1, 2)):
+    for inj, block in zip(injections, markers):
         mset = _measured(inj, block, states, noise_px, rng, geometry, rest_px)
         path = Path(out_dir) / f"run_{inj.run:03d}"
         save_measured_set(path, mset)
@@ -169,11 +208,9 @@ def remake_set(cfg: LoopConfig, base: Mapping[str, float], states: list[Target],
     dummy = np.zeros((len(states), *np.shape(states[0].markers)))
     for inj in injections[:run]:
         _measured(inj, dummy, states, cfg.selftest.noise_px, rng, geometry, rest_px)
-    inj = injections[run]
-    markers, failed = simulate([(t.state, inj.params) for t in states])
-    if np.any(failed):
-        raise ValueError(f"self-test: the twin diverged while making run {run}")
-    block = np.asarray(markers).reshape(len(states), -1, 2)
+    batch = [injections[run]]
+    block = simulate_injections(batch, states, simulate, cfg, base)[0]  # redrawn in place where it diverges
+    inj = batch[0]
     return inj, _measured(inj, block, states, cfg.selftest.noise_px, rng, geometry, rest_px)
 
 
@@ -184,7 +221,8 @@ def run_selftest(cfg: LoopConfig, simulate, base: Mapping[str, float], template:
     cfg.validate()
     rng = np.random.default_rng(cfg.selftest.seed)
     injections = draw_injections(cfg, base, rng)
-    paths = make_sets(injections, template, simulate, cfg.selftest.noise_px, rng, Path(out_dir) / "sets",
+    markers = simulate_injections(injections, template, simulate, cfg, base)
+    paths = make_sets(injections, markers, template, cfg.selftest.noise_px, rng, Path(out_dir) / "sets",
                       geometry, rest_px)
     problems, sigmas = [], {}
     for inj, path in zip(injections, paths):
@@ -209,7 +247,7 @@ def run_selftest(cfg: LoopConfig, simulate, base: Mapping[str, float], template:
                      "effects_named": "+".join(named) or "none", "mae_before_px": b["all"],
                      "mae_after_px": p.summary()["all"], "excess_ratio": p.final["test"]["excess_ratio"],
                      "injected_effects": inj.effects, "unlisted": inj.unlisted, "named": added,
-                     "unexplained": unexplained, "strengths": inj.strengths, "betas": inj.betas,
+                     "unexplained": unexplained, "strengths": inj.strengths, "betas": inj.betas, "redrawn": inj.redrawn,
                      "tries": [{"round": r["round"], "effects": r.get("effects", []), "accepted": r["accepted"],
                                 "passed": r.get("passed", r["accepted"]),
                                 "indistinguishable": r.get("indistinguishable", []),
