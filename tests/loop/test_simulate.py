@@ -35,8 +35,10 @@ def test_workers_and_cache_change_no_bit():
     first, bad = fast.simulate(jobs[:3])
     m, m_bad = fast.simulate(jobs)  # three envs read back, three run in two threads per kind
     assert fast.envs_simulated == 6 and fast.cache_hits == 3
-    # each of its calls: three parts of one env (6 frames) on two workers, 12 env-frames on the busiest
-    assert plain.env_frames == plain.span_frames == 36 and fast.env_frames == 36 and fast.span_frames == 2 * 12
+    # each of its calls: three parts of one env (6 frames) on two worker threads, 12 env-frames on the busier
+    # (18 only if one thread ran two parts before the other took one: the span is what the pool did)
+    assert plain.env_frames == plain.span_frames == 36 and fast.env_frames == 36
+    assert 2 * 12 <= fast.span_frames < fast.env_frames
     assert fast.cached_frames == 18 and plain.cached_frames == 0
     np.testing.assert_array_equal(first, ref[:3])
     np.testing.assert_array_equal(m, ref)

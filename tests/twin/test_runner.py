@@ -1,5 +1,6 @@
 """Batched trajectory runs on the coarse mesh: files, manifest, failures, determinism, the app."""
 
+import gc
 import json
 from pathlib import Path
 
@@ -11,6 +12,7 @@ from palpation.paths import REPO_ROOT
 from palpation.twin.config import TwinConfig
 from palpation.twin.output import load_trajectory, write_outputs
 from palpation.twin.runner import EnvRequest, run_batch, run_batches, simulate_states
+from palpation.twin.simulator import BatchedTwin
 from palpation.twin.trajectory import plan_trajectory
 
 ABSURD_E = 1e11  # Pa: far past the explicit step's stability limit, NaN within a few frames
@@ -80,6 +82,20 @@ def test_batches_in_threads_give_the_same_records(mesh):
     for a, b in zip(one[0].records, recs):
         for key in ("markers", "labels", "centreline_px", "contact", "T_BA", "frame_index"):
             assert getattr(a, key).tobytes() == getattr(b, key).tobytes(), f"{a.name}:{key}"
+
+
+def test_leaving_the_batch_frees_the_twin(mesh, binding):
+    """LockedBatch frees the twin's Warp arrays as it leaves, under the capture lock: no reference cycle through
+    the per-frame kernels is left for the garbage collector to free in some thread's capture later."""
+    gc.collect()
+    gc.disable()
+    try:
+        res = run_batch(mesh, TwinConfig(), [EnvRequest("press", name="a")], binding, device="cpu", progress=False,
+                        max_frames=3)
+        alive = sum(isinstance(o, BatchedTwin) for o in gc.get_objects())
+    finally:
+        gc.enable()
+    assert res.records[0].markers.shape == (3, 127, 2) and alive == 0
 
 
 def compose_simulate(mesh_path: Path, out_dir: Path, workers: int = 0):

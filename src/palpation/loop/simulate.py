@@ -13,7 +13,8 @@ batch it runs in: the CPU kernels run env after env, each env's sums in its own 
   starts, each polish chain's base, the evaluation after a polish) is read back instead of re-run;
 * `workers` threads: Warp runs a CPU kernel on one core and replays a CPU graph without Python's lock,
   so the batches (each kind's envs cut in `workers` parts) run side by side. Building a twin and
-  capturing its graph go through Warp's process-wide capture state: one thread at a time (CAPTURE_LOCK).
+  capturing its graph go through Warp's process-wide capture state: one thread at a time
+  (twin.runner.LockedBatch, twin.warp_runtime.run_parts).
 """
 
 from __future__ import annotations
@@ -21,7 +22,6 @@ from __future__ import annotations
 import logging
 import time
 from collections import OrderedDict
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Mapping
 
@@ -32,9 +32,9 @@ from palpation.twin.config import TwinConfig
 from palpation.twin.markers import CameraBinding, ImageSimilarity, bind_markers_through, project_markers_np
 from palpation.twin.mesh import SensorMesh
 from palpation.twin.parameters import PARAMETERS
-from palpation.twin.runner import EnvRequest, ScheduledBatch, plan_requests
+from palpation.twin.runner import EnvRequest, LockedBatch, plan_requests
 from palpation.twin.trajectory import mount_offset, padded_schedule, with_mount
-from palpation.twin.warp_runtime import CAPTURE_LOCK as _WARP, usable_cores
+from palpation.twin.warp_runtime import run_parts, usable_cores
 
 log = logging.getLogger(__name__)
 CACHE_BYTES = 512 * 2**20  # final node positions kept for re-use (~5 kB an env coarse, ~41 kB reference)
@@ -90,8 +90,8 @@ class LoopSimulator:
         self._cache_room, self._cache_used = int(cache_bytes), 0
         self.envs_simulated = 0  # distinct physics simulated so far (for the budget log)
         self.cache_hits = 0  # distinct physics read back from the cache instead
-        # env-frames simulated, and their span: per call the busiest worker's share (parts handed out longest
-        # first to the least loaded), i.e. the twin's wall time in env-frames when `workers` cores are free
+        # env-frames simulated, and their span: per call the env-frames of the worker thread that ran the most
+        # (as the pool handed the parts out, longest first), i.e. the twin's wall time in env-frames
         self.env_frames = self.span_frames = self.cached_frames = 0  # cached: the env-frames the cache saved
         self.calls, self.sim_s = 0, 0.0  # twin calls (sequential batches) and the time spent in them
 
@@ -149,17 +149,11 @@ class LoopSimulator:
                  for part in [[g[i] for i in part]]]
         work = [len(p) * self._frames(p[0]) for p in parts]  # env-frames: a part's cost on a CPU
         order = sorted(range(len(parts)), key=lambda i: -work[i])
-        parts = [parts[i] for i in order]
-        load = [0] * self.workers
-        for i in order:
-            load[load.index(min(load))] += work[i]
+        parts, work = [parts[i] for i in order], [work[i] for i in order]
+        runs, ran_on = run_parts(self._run, parts, self.workers)
+        load = np.bincount(ran_on, weights=work, minlength=1)  # env-frames each worker thread really ran
         self.env_frames += sum(work)
-        self.span_frames += max(load)
-        if self.workers > 1 and len(parts) > 1:
-            with ThreadPoolExecutor(self.workers) as pool:
-                runs = list(pool.map(self._run, parts))
-        else:
-            runs = [self._run(p) for p in parts]
+        self.span_frames += int(load.max())
         out = {}
         for part, (n_A, T, bad) in zip(parts, runs):
             for i, key in enumerate(part):
@@ -196,18 +190,11 @@ class LoopSimulator:
         nodes = np.full((len(group), self.mesh.n_nodes, 3), np.nan, np.float32)
         failed = np.zeros(len(group), bool)
         ends = {int(e) - 1 for e in lengths}
-        with _WARP:  # build, upload and capture (the first frame's step) one twin at a time
-            batch = ScheduledBatch(self.mesh, self.cfg, reqs, trajs, schedule, self.device)
-            frames = batch.frames()
-            f = next(frames)
-        while f is not None:  # the graph replays outside the lock: Warp releases Python's lock there
-            if f in ends:  # read only where some env ends; the failure flag is sticky
-                with _WARP:
+        with LockedBatch(self.mesh, self.cfg, reqs, trajs, schedule, self.device) as run:
+            for f in run:
+                if f in ends:  # read only where some env ends; the failure flag is sticky
                     done = lengths - 1 == f
-                    nodes[done] = batch.sim.positions_world()[done]
-                    failed[done] = batch.sim.failed()[done]
-            f = next(frames, None)
-        with _WARP:
-            del frames, batch  # Warp arrays freed outside any other thread's capture
+                    nodes[done], failed[done] = run.read(lambda sim, _: (sim.positions_world()[done],
+                                                                         sim.failed()[done]))
         T_last = np.stack([t.T_BA[-1] for t in trajs])
         return nodes, T_last, failed | ~np.all(np.isfinite(nodes), axis=(1, 2))

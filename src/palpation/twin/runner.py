@@ -30,7 +30,7 @@ from palpation.twin.parameters import by_env_key, per_env_keys
 from palpation.twin.simulator import BatchedTwin
 from palpation.twin.trajectory import (Trajectory, mount_offset, padded_schedule, plan_trajectories, waypoints,
                                        with_mount)
-from palpation.twin.warp_runtime import CAPTURE_LOCK, init_warp, resolve_device, usable_cores
+from palpation.twin.warp_runtime import CAPTURE_LOCK, init_warp, resolve_device, run_parts, usable_cores
 
 log = logging.getLogger(__name__)
 READ_FAILED_EVERY = 20  # frames between host reads of the failure flags (the reference's interval)
@@ -122,6 +122,47 @@ class ScheduledBatch:
             yield f
 
 
+class LockedBatch:
+    """A ScheduledBatch run beside other threads' twins: the one owner of the thread protocol (run_batch and
+    loop.simulate use it; warp_runtime.CAPTURE_LOCK says why).
+
+    `with LockedBatch(mesh, cfg, requests, trajs, schedule, device, outputs, extra) as run:` builds the twin,
+    `outputs(sim)` (device arrays the frames write) and uploads the schedule under the lock, capturing the first
+    frame's graph there; `for f in run` yields each frame index, the rest replayed outside the lock; `run.read(fn)`
+    returns fn(sim, outputs) read under it; leaving frees every Warp array under it (nothing else may hold them).
+    `extra(sim, outputs, frame_index, offset)` launches kernels captured after each frame's physics.
+    """
+
+    def __init__(self, mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest], trajs: list[Trajectory],
+                 schedule: np.ndarray, device, outputs=None, extra=None, progress: bool = False):
+        self._build = (mesh, cfg, requests, trajs, schedule, device)
+        self._outputs, self._extra, self._progress = outputs, extra, progress
+
+    def __enter__(self) -> "LockedBatch":
+        with CAPTURE_LOCK:
+            self._batch = ScheduledBatch(*self._build)
+            self._held = self._outputs(self._batch.sim) if self._outputs else None
+            extra = None
+            if self._extra is not None:  # reaches the twin through self: leaving cuts the cycle, no GC needed
+                def extra(frame_index, offset):
+                    self._extra(self._batch.sim, self._held, frame_index, offset)
+            self._frames = self._batch.frames(extra, self._progress)
+            self._first = next(self._frames)
+        return self
+
+    def __iter__(self):
+        yield self._first
+        yield from self._frames  # outside the lock: Warp replays a CPU graph without Python's lock
+
+    def read(self, fn):
+        with CAPTURE_LOCK:
+            return fn(self._batch.sim, self._held)
+
+    def __exit__(self, *exc) -> None:
+        with CAPTURE_LOCK:  # Warp arrays freed outside any other thread's capture
+            del self._frames, self._batch, self._held
+
+
 def tip_node_B(mesh: SensorMesh) -> np.ndarray:
     """The undeformed tip the controller tracks: the highest node in B (and in E)."""
     return mesh.nodes[np.argmax(mesh.nodes[:, 2])]
@@ -192,43 +233,34 @@ def run_batch(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest],
     first, end = record_windows(trajs, reqs)
     n, n_frames = len(reqs), len(schedule)
 
-    start = time.perf_counter()
-    with CAPTURE_LOCK:  # build, upload and capture (the first frame) one twin at a time (warp_runtime)
-        batch = ScheduledBatch(mesh, cfg, reqs, trajs, schedule, device)
-        sim = batch.sim
-        proj = MarkerProjector(binding, schedule, mesh.n_nodes, first, end, device=device)
-        contact_dev = wp.zeros((n_frames, n), dtype=wp.int32, device=device)  # written on device, read once
+    def device_outputs(sim):  # written on the device every frame, read once at the end
+        return (MarkerProjector(binding, schedule, mesh.n_nodes, first, end, device=device),
+                wp.zeros((n_frames, n), dtype=wp.int32, device=device))
 
-        def per_frame(frame_index, offset):  # captured with the frame: flags and markers, no host work
-            wp.launch(record_contact_flags, dim=n, device=device, inputs=[sim.contact_flag, frame_index, offset],
-                      outputs=[contact_dev])
-            proj.extract_at(sim.x, frame_index, offset)
+    def per_frame(sim, outputs, frame_index, offset):  # captured with the frame: flags and markers, no host work
+        proj, contact_dev = outputs
+        wp.launch(record_contact_flags, dim=n, device=device, inputs=[sim.contact_flag, frame_index, offset],
+                  outputs=[contact_dev])
+        proj.extract_at(sim.x, frame_index, offset)
 
-        frames = batch.frames(per_frame, progress)
-        f = next(frames)
     failed_at = np.full(n, -1)
     # the simulator's failure flag is sticky, so reading it sparsely (plus at each env's last frame,
     # to tell a failure inside an env's own frames from one after it finished) loses nothing
     checks = set(range(READ_FAILED_EVERY - 1, n_frames, READ_FAILED_EVERY)) | set((lengths - 1).tolist())
     checked_to = 0  # frames [0, checked_to) are covered by earlier checks
-    while True:  # the graph replays outside the lock
-        if f in checks:
-            with CAPTURE_LOCK:
-                failed_now = sim.failed()
+    start = time.perf_counter()
+    with LockedBatch(mesh, cfg, reqs, trajs, schedule, device, device_outputs, per_frame, progress) as run:
+        for f in run:
+            if f not in checks:
+                continue
+            failed_now = run.read(lambda sim, _: sim.failed())
             # blame only envs still inside their own frames since the last check
             bad = failed_now & (failed_at < 0) & (lengths > checked_to)
             failed_at[bad] = f
             checked_to = f + 1
             if np.all((failed_at >= 0) | (lengths <= checked_to)):
                 break  # every env has either failed or finished
-        nxt = next(frames, None)
-        if nxt is None:
-            break
-        f = nxt
-    with CAPTURE_LOCK:
-        markers, centre = proj.results()
-        contact = contact_dev.numpy().astype(bool)
-        del frames, per_frame, proj, contact_dev, sim, batch  # Warp arrays freed outside another thread's capture
+        markers, centre, contact = run.read(lambda _, out: (*out[0].results(), out[1].numpy().astype(bool)))
     if through is not None:  # the projector ran the nominal camera: map into the true image
         markers = through.markers(markers).astype(np.float32)
         centre = image.apply(centre).astype(np.float32)
@@ -288,10 +320,7 @@ def run_batches(mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest], b
     def one(part):
         return run_batch(mesh, cfg, part, device=device, progress=progress and len(parts) == 1, max_frames=max_frames)
 
-    if workers > 1 and len(parts) > 1:
-        with ThreadPoolExecutor(workers) as pool:
-            return list(pool.map(one, parts))
-    return [one(p) for p in parts]
+    return run_parts(one, parts, workers)[0]
 
 
 def simulate_states(mesh: SensorMesh, cfg: TwinConfig, requests: list[tuple[str, dict]],

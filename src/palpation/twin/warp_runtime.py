@@ -13,19 +13,40 @@ import os
 import sys
 import tempfile
 import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import warp as wp
 
 log = logging.getLogger(__name__)
 # Warp's CPU graph capture is process-wide state: threads that each run a twin (loop.simulate, apps.simulate)
-# build, capture and read their twins under this lock and replay their graphs outside it (Warp replays a CPU
-# graph natively, without Python's lock, one core per thread)
+# build, capture, read and free their twins under this lock and replay their graphs outside it (Warp replays a
+# CPU graph natively, without Python's lock, one core per thread); twin.runner.LockedBatch keeps that protocol
 CAPTURE_LOCK = threading.Lock()
 
 
 def usable_cores() -> int:
     """Cores this process may run on (its affinity where the OS has one): the CPU twin's threads."""
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def run_parts(fn, parts: list, workers: int) -> tuple[list, list[int]]:
+    """`fn(part)` for each part, in order: side by side in `workers` threads when there are several workers and
+    parts (a thread takes the next part as it frees, so give the longest first), else one by one here.
+
+    Returns the results and, per part, the worker that ran it (numbered by first use; all 0 one by one)."""
+    if workers <= 1 or len(parts) <= 1:
+        return [fn(p) for p in parts], [0] * len(parts)
+    ran_on = [0] * len(parts)
+
+    def one(i):
+        ran_on[i] = threading.get_ident()
+        return fn(parts[i])
+
+    with ThreadPoolExecutor(workers) as pool:
+        results = list(pool.map(one, range(len(parts))))
+    number: dict[int, int] = {}
+    return results, [number.setdefault(t, len(number)) for t in ran_on]
+
 
 CPU_ONLY_WARNING = b"Could not find or load the NVIDIA CUDA driver"
 

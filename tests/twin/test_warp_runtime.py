@@ -1,0 +1,25 @@
+"""Parts run side by side in threads (twin.warp_runtime.run_parts), results in the parts' order."""
+
+import threading
+
+import pytest
+
+from palpation.twin.warp_runtime import run_parts
+
+
+def test_parts_run_side_by_side():
+    barrier = threading.Barrier(2, timeout=10)
+
+    def fn(x):
+        barrier.wait()  # both parts at once, else BrokenBarrierError
+        return 2 * x
+
+    results, ran_on = run_parts(fn, [1, 2], workers=2)
+    assert results == [2, 4] and ran_on == [0, 1]
+
+
+@pytest.mark.parametrize("workers, parts", [(1, [1, 2, 3]), (4, [5])])
+def test_one_worker_or_one_part_runs_here(workers, parts):
+    here = threading.get_ident()
+    results, ran_on = run_parts(lambda x: (x, threading.get_ident()), parts, workers)
+    assert results == [(x, here) for x in parts] and ran_on == [0] * len(parts)
