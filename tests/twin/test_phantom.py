@@ -32,11 +32,14 @@ def phantom_force(mesh, cfg, rotation, tip_depth_m, env_params=None):
     sim = BatchedTwin(mesh, 1, cfg, env_params or {})
     world = rotation.apply(mesh.nodes)
     world += np.array([*CENTRE_XY_M, PHANTOM_TOP_M - tip_depth_m]) - world[np.argmin(world[:, 2])]
-    x = wp.array(world.astype(np.float32), dtype=wp.vec3)
-    zeros = wp.zeros(mesh.n_nodes, dtype=wp.vec3)
-    f_c = wp.zeros(mesh.n_nodes, dtype=wp.vec3)
-    wp.launch(eval_contact_forces, dim=sim.n_surface, inputs=[x, zeros, zeros, sim.inv_mass, sim.surface, sim.n_surface,
-                                                             mesh.n_nodes, 0.0, sim.contact, 1],
+    # on the twin's device (the config's, cpu), not Warp's default: on a CUDA machine that is cuda:0, and a launch
+    # there with the twin's CPU arrays was an illegal memory access that broke every CUDA test after it
+    dev = sim.device
+    x = wp.array(world.astype(np.float32), dtype=wp.vec3, device=dev)
+    zeros = wp.zeros(mesh.n_nodes, dtype=wp.vec3, device=dev)
+    f_c = wp.zeros(mesh.n_nodes, dtype=wp.vec3, device=dev)
+    wp.launch(eval_contact_forces, dim=sim.n_surface, device=dev,
+              inputs=[x, zeros, zeros, sim.inv_mass, sim.surface, sim.n_surface, mesh.n_nodes, 0.0, sim.contact, 1],
               outputs=[f_c, sim.contact_flag])
     return f_c.numpy().astype(np.float64).sum(axis=0)
 
