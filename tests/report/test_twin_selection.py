@@ -141,6 +141,7 @@ def test_table_task_end_to_end(tmp_path):
         "choice": str(tmp_path / "out" / "choice.json"), "choice_fit": str(tmp_path / "out" / "fit" / "fitted.yaml")}}))
     assert made["chosen"] == out["chosen"] == df.loc[df["chosen"], "twin"].item()
     assert table(OmegaConf.create({**cfg, "choice": str(tmp_path / "out" / "choice.json")}))["chosen"] == made["chosen"]
+    assert "The main Sim set's twin: calibrated (the evidence's choice" in (tmp_path / "out" / "t.md").read_text()
     save_json(tmp_path / "out" / "stale.json", {**made, "chosen": "slide_loop"})
     with pytest.raises(ValueError, match="stale.json chose slide_loop but the table chooses calibrated"):
         table(OmegaConf.create({**cfg, "choice": str(tmp_path / "out" / "stale.json")}))

@@ -144,19 +144,20 @@ def table(cfg: DictConfig) -> dict:
     c = OmegaConf.to_container(cfg, resolve=True)
     candidates, replays = _candidates(c)
     df = selection_table(candidates)  # candidates in conf order: simplest first (the tie rule's order)
+    chosen = str(df.loc[df["chosen"], "twin"].iloc[0])
+    made = read_json(c["choice"], "rerun rule twin_choice") if c.get("choice") else None
+    if made and made["chosen"] != chosen:  # rule twin_choice's record: the same function, the same replays
+        raise ValueError(f"{c['choice']} chose {made['chosen']} but the table chooses {chosen} from the same replays; "
+                         "rerun rule twin_choice (its replays are older or newer than the table's)")
     save_text(c["out"]["csv"], csv_text(df.to_dict("records"), COLUMNS, 4, na_rep="nan"))
     rows = [[str(r[k]).replace("|", "/") if not isinstance(r[k], float) else f"{r[k]:.3f}" for k in COLUMNS]
             for r in df.to_dict("records")]
     note = f"Models: recipe {c['trained_with']}, every candidate alike.\n\n" if c.get("trained_with") else ""
     note += (f"Choice: the simplest twin (rows top to bottom) unless a more complex one has a significantly lower "
              f"held-out slide MAE ({TIE_TEST}, alpha {TIE_ALPHA:g}); `why` gives each row's test.\n\n")
+    if made:
+        note += f"The main Sim set's twin: {made['sim_set_twin']} ({made['how']}; config dataset.twin).\n\n"
     save_text(c["out"]["md"], f"# Twin on the task ({c['profile']} profile)\n\n{note}" + markdown(list(COLUMNS), rows))
-    chosen = str(df.loc[df["chosen"], "twin"].iloc[0])
-    if c.get("choice"):  # rule twin_choice's record: the same function chose, on the same replays
-        made = read_json(c["choice"], "rerun rule twin_choice")["chosen"]
-        if made != chosen:
-            raise ValueError(f"{c['choice']} chose {made} but the table chooses {chosen} from the same replays; "
-                             "rerun rule twin_choice (its replays are older or newer than the table's)")
     _figure(c, chosen, replays[chosen])
     log.info("twin selection: chosen %s -> %s", chosen, c["out"]["csv"])
     return {"chosen": chosen, "rows": df.to_dict("records")}
