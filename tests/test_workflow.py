@@ -206,6 +206,12 @@ def test_sim_set_twin_follows_the_choice(tmp_path):
     assert "task=choice dataset_twin=auto" in listing
     pinned = dry_run(tmp_path / "p", "-p", "results/sim/dataset/manifest.json", *tiny)  # tiny pins photo_loop
     assert "twin_choice" not in job_stats(pinned) and "file://results/loop]" in pinned
+    # the twin ablation's `loop` row stays the photo loop's twin: its own runs on photo_loop's own Sim set
+    auto.write_text("dataset: {twin: auto}\ntrain: {twin_ablation: {seeds: [0]}}\n")
+    (tmp_path / "abl").mkdir()
+    stats = job_stats(dry_run(tmp_path / "abl", "results/train/report/twin_ablation.csv", *tiny, "--configfile", str(auto)))
+    assert stats["train_twin_ablation_loop"] == 1 and stats["train_twin_ablation"] == 1
+    assert stats["judge_dataset"] == 1 and not {"twin_choice", "simulate_dataset", "train"} & set(stats)
     auto.write_text("dataset: {twin: best}\n")
     text = failing_dry_run(tmp_path / "bad", *tiny, "--configfile", str(auto))
     line = next(line for line in text.splitlines() if "'best'" in line)

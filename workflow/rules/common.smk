@@ -288,6 +288,11 @@ DATASET_TWIN = config["dataset"]["twin"]
 # photo_loop's judge Sim set is the main one only where the main set is pinned to it; else the judge simulates its own
 JUDGE_PHOTO_IS_MAIN = DATASET_TWIN == "photo_loop"
 JUDGE_OWN_PHOTO = JUDGE_RECIPE != TRAIN["recipe"] or not JUDGE_PHOTO_IS_MAIN
+# the dataset-twin ablation's `loop` row (photo loop's twin vs calibrated): the main sweep where the main Sim set is
+# the photo loop's, else runs of its own on photo_loop's own Sim set (rule judge_dataset)
+PHOTO_SIM = TRAIN_DATA["sim"] if JUDGE_PHOTO_IS_MAIN else f"{JUDGE_DIR}/sim/photo_loop/manifest.json"
+TWIN_ABL_LOOP_RUN = TRAIN_RUN if JUDGE_PHOTO_IS_MAIN else str(
+    run_dir(f"{TRAIN_DIR}/twin_loop", "{exp}", "{clip_len}", "{seed}"))
 # judge.reuse: {twin: {fit: <dir>/twin_fit/fitted.yaml, runs: <runs root>}}: a candidate's fitted twin and trained
 # runs taken as they are (an earlier run's, workflow/scripts/judge_reuse.py), so neither is refitted nor retrained;
 # only what changed (e.g. the slide loop) reruns (docs/loop.md "Paper-profile run")
@@ -345,7 +350,7 @@ def judge_sim(wildcards):
     if wildcards.twin == "calibrated":
         return rules.simulate_dataset_calibrated.output.manifest
     if wildcards.twin == "photo_loop" and JUDGE_PHOTO_IS_MAIN:
-        return TRAIN_DATA["sim"]
+        return PHOTO_SIM
     return f"{JUDGE_DIR}/sim/{wildcards.twin}/manifest.json"
 
 
