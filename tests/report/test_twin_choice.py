@@ -98,3 +98,13 @@ def test_the_rule_s_choice_overrides_compose(tmp_path):
         cfg = compose("twin_judge", overrides=overrides)
     assert list(cfg.candidates) == ["calibrated", "photo_loop"]  # simplest first
     assert choice(cfg)["sim_set_twin"] == "calibrated"
+
+
+def test_the_schema_allows_exactly_the_app_s_values():
+    """workflow/schemas' dataset.twin enum (the DAG-time check) and the app's DATASET_TWINS name the same values."""
+    from palpation.paths import REPO_ROOT
+    from palpation.report.twin_selection import DATASET_TWINS
+
+    schema = yaml.safe_load((REPO_ROOT / "workflow" / "schemas" / "config.schema.yaml").read_text())
+    twin = schema["properties"]["dataset"]["properties"]["twin"]
+    assert twin["enum"] == list(DATASET_TWINS) and twin["default"] == "auto"
