@@ -27,7 +27,8 @@ def toy(tmp_path, photo, slide=None, twin="auto"):
         save_json(slides[name], {"trials": trials, "mae_px": mae, "vessel_ratio_sim": 1.0, "vessel_ratio_real": 1.1})
         fits[name] = str(tmp_path / name / "twin_fit" / "fitted.yaml")
         save_text(fits[name], f"# @package twin\n# Fitted by a toy.\nmaterial:\n  E: {1.0e6 + len(name)}\n")
-    out = {"choice": str(tmp_path / "out" / "choice.json"), "choice_fit": str(tmp_path / "out" / "twin_fit" / "fitted.yaml")}
+    out = {"choice": str(tmp_path / "out" / "choice.json"),
+           "choice_fit": str(tmp_path / "out" / "twin_fit" / "fitted.yaml")}
     return OmegaConf.create({"candidates": cands, "slides": slides, "fits": fits, "dataset_twin": twin, "out": out})
 
 

@@ -304,7 +304,7 @@ for _twin, _spec in JUDGE_REUSE.items():
 JUDGE_TRAINED = [t for t in (["calibrated"] + (["photo_loop"] if JUDGE_OWN_PHOTO else [])
                              + [f"slide_loop_{f}" for f in JUDGE_FOLDS])
                  if t not in JUDGE_REUSE]  # runs judge.smk trains (else photo_loop: the sweep's; reused: as given)
-# candidates whose Sim set rule judge_dataset simulates (calibrated's is the twin ablation's, simulate_dataset_calibrated)
+# candidates whose Sim set judge_dataset simulates (calibrated's is the twin ablation's, simulate_dataset_calibrated)
 JUDGE_OWN_SETS = ([] if JUDGE_PHOTO_IS_MAIN else ["photo_loop"]) + [f"slide_loop_{f}" for f in JUDGE_FOLDS]
 JUDGE_RUN = str(run_dir(f"{JUDGE_DIR}/train/{{twin}}", "{exp}", "{clip_len}", "{seed}"))
 JUDGE_EXPERIMENTS = ["A-to-B", "A-to-C"]  # Sim -> Silicone (cross-fitted), Sim -> Meat: both train on Sim

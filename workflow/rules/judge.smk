@@ -3,8 +3,9 @@
 # the other fold's trials); the twin is chosen by its held-out real-slide motion MAE (no test labels).
 # Candidates: calibrated (calibrate.smk), photo_loop (loop.smk), slide_loop_odd / slide_loop_even (the
 # slide loop's fold twins, slides.smk). Reuses what exists: photo_loop's runs = the main sweep (results/train) where
-# dataset.twin pins the main Sim set to photo_loop and judge.recipe is the sweep's, calibrated's Sim set = the twin ablation's (dataset.smk); rule twin_choice picks the main Sim set's twin for
-# dataset.twin auto (common.smk dataset_fit); calibrated and the fold twins train here
+# dataset.twin pins the main Sim set to photo_loop and judge.recipe is the sweep's; calibrated's Sim set = the twin
+# ablation's (dataset.smk). Rule twin_choice picks the main Sim set's twin for dataset.twin auto (common.smk
+# dataset_fit) from the replays alone. calibrated and the fold twins train here
 # (results/judge/train/<twin>), all seeds of a configuration in one process where train.seeds_together.
 # Needs common.smk (JUDGE*, judge_* helpers, PY, TWIN_ARGS, fit_overrides, hydra_dir) and the rule files above.
 # Opt-in: judge.seeds [] (quick, tiny) leaves it out of `all`; the paper profile turns it on, and
