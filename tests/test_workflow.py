@@ -187,6 +187,37 @@ def test_judge_reuse_reruns_only_what_the_slide_loop_changes(tmp_path):
     assert "judge.reuse.slide_loop: need a candidate of" in failing_dry_run(tmp_path / "bad", "--configfile", str(extra))
 
 
+def test_sim_set_twin_follows_the_choice(tmp_path):
+    """Issue 12 item 5 (docs/loop.md "Which twin makes the Sim set"): with dataset.twin auto the main Sim set waits for
+    rule twin_choice, which needs the candidates' held-out replays (slide loop, fold twins) and no training; a pinned
+    twin (tiny, quick) reads that twin's fit directly; an unknown value stops the DAG build in one line."""
+    tiny = ("--config", "profile=tiny")
+    auto = tmp_path / "auto.yaml"
+    auto.write_text("dataset: {twin: auto}\n")
+    for sub in ("a", "p", "bad"):
+        (tmp_path / sub).mkdir()
+    listing = dry_run(tmp_path / "a", "-p", "results/sim/dataset/manifest.json", *tiny, "--configfile", str(auto))
+    stats = job_stats(listing)
+    assert stats["twin_choice"] == 1 and stats["judge_slides"] == 4 and stats["judge_fold_twin"] == 2
+    assert stats["slide_loop"] == 1 and stats["simulate_dataset"] == 1
+    assert not any(r.startswith("judge_train") or r.startswith("judge_dataset") or r == "train" for r in stats)
+    sim = next(ln for ln in listing.splitlines() if "SNAKEMAKE_RULE=simulate_dataset " in ln)
+    assert "'hydra.searchpath=[file://results/judge/choice]' +twin_fit=fitted" in sim
+    assert "task=choice dataset_twin=auto" in listing
+    pinned = dry_run(tmp_path / "p", "-p", "results/sim/dataset/manifest.json", *tiny)  # tiny pins photo_loop
+    assert "twin_choice" not in job_stats(pinned) and "file://results/loop]" in pinned
+    # the twin ablation's `loop` row stays the photo loop's twin: its own runs on photo_loop's own Sim set
+    auto.write_text("dataset: {twin: auto}\ntrain: {twin_ablation: {seeds: [0]}}\n")
+    (tmp_path / "abl").mkdir()
+    stats = job_stats(dry_run(tmp_path / "abl", "results/train/report/twin_ablation.csv", *tiny, "--configfile", str(auto)))
+    assert stats["train_twin_ablation_loop"] == 1 and stats["train_twin_ablation"] == 1
+    assert stats["judge_dataset"] == 1 and not {"twin_choice", "simulate_dataset", "train"} & set(stats)
+    auto.write_text("dataset: {twin: best}\n")
+    text = failing_dry_run(tmp_path / "bad", *tiny, "--configfile", str(auto))
+    line = next(line for line in text.splitlines() if "'best'" in line)
+    assert "at key 'dataset.twin'" in line and "workflow/schemas/config.schema.yaml" in line
+
+
 def test_paper_recipe_ablation_plan(tmp_path):
     """The paper profile's recipe ablation (docs/recipe.md, its device-time plan): with train.seeds_together one job
     per (recipe, switch_off, training set), A-to-B and A-to-C trained once; switch rows for those two only; the

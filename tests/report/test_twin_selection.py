@@ -8,7 +8,7 @@ import yaml
 from omegaconf import OmegaConf
 from sklearn.metrics import average_precision_score
 
-from palpation.io import save_json
+from palpation.io import save_json, save_text
 from palpation.loop.slide_twins import heldout_trials, twin_overrides, write_fold_twin
 from palpation.measured_sequences import save_sequence_set
 from palpation.metrics.scores import Scores, save_scores
@@ -130,6 +130,21 @@ def test_table_task_end_to_end(tmp_path):
     assert df.loc[df["twin"] == "slide_loop", "heldout_slide_mae_px"].item() == pytest.approx(2.25)
     assert df.loc[1, "p_vs_simpler"] == pytest.approx(1 / 16) and df.loc[0, "why"].startswith("chosen: simplest")
     assert (tmp_path / "out" / "fig.png").exists() and (tmp_path / "out" / "fig.pdf").exists()
+    # rule twin_choice (the main Sim set's twin) decides from the same replays by the same function: the same twin,
+    # and the table refuses a choice.json that names another (stale replays on one side)
+    from palpation.apps.twin_judge import choice
+
+    fits = {n: str(tmp_path / n / "twin_fit" / "fitted.yaml") for n in cfg["slides"]}
+    for path in fits.values():
+        save_text(path, "# @package twin\nmaterial:\n  E: 1.0e6\n")
+    made = choice(OmegaConf.create({**cfg, "fits": fits, "dataset_twin": "auto", "out": {
+        "choice": str(tmp_path / "out" / "choice.json"), "choice_fit": str(tmp_path / "out" / "fit" / "fitted.yaml")}}))
+    assert made["chosen"] == out["chosen"] == df.loc[df["chosen"], "twin"].item()
+    assert table(OmegaConf.create({**cfg, "choice": str(tmp_path / "out" / "choice.json")}))["chosen"] == made["chosen"]
+    assert "The main Sim set's twin: calibrated (the evidence's choice" in (tmp_path / "out" / "t.md").read_text()
+    save_json(tmp_path / "out" / "stale.json", {**made, "chosen": "slide_loop"})
+    with pytest.raises(ValueError, match="stale.json chose slide_loop but the table chooses calibrated"):
+        table(OmegaConf.create({**cfg, "choice": str(tmp_path / "out" / "stale.json")}))
 
 
 def test_results_page_section_checks_the_aims():

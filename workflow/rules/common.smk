@@ -282,7 +282,17 @@ JUDGE_TWINS = ["calibrated", "photo_loop"] + [f"slide_loop_{f}" for f in JUDGE_F
 # judge.recipe: the recipe every candidate's models train with (null: the profile's train.recipe); with another
 # recipe than the main sweep's, photo_loop trains here too instead of reusing the sweep's runs (docs/loop.md)
 JUDGE_RECIPE = JUDGE.get("recipe") or TRAIN["recipe"]
-JUDGE_OWN_PHOTO = JUDGE_RECIPE != TRAIN["recipe"]
+# dataset.twin (schema: auto | calibrated | photo_loop | slide_loop): the main Sim set's twin; auto = rule
+# twin_choice's (the held-out slide MAE with the tie rule), a name pins it (docs/loop.md "Which twin makes the Sim set")
+DATASET_TWIN = config["dataset"]["twin"]
+# photo_loop's judge Sim set is the main one only where the main set is pinned to it; else the judge simulates its own
+JUDGE_PHOTO_IS_MAIN = DATASET_TWIN == "photo_loop"
+JUDGE_OWN_PHOTO = JUDGE_RECIPE != TRAIN["recipe"] or not JUDGE_PHOTO_IS_MAIN
+# the dataset-twin ablation's `loop` row (photo loop's twin vs calibrated): the main sweep where the main Sim set is
+# the photo loop's, else runs of its own on photo_loop's own Sim set (rule judge_dataset)
+PHOTO_SIM = TRAIN_DATA["sim"] if JUDGE_PHOTO_IS_MAIN else f"{JUDGE_DIR}/sim/photo_loop/manifest.json"
+TWIN_ABL_LOOP_RUN = TRAIN_RUN if JUDGE_PHOTO_IS_MAIN else str(
+    run_dir(f"{TRAIN_DIR}/twin_loop", "{exp}", "{clip_len}", "{seed}"))
 # judge.reuse: {twin: {fit: <dir>/twin_fit/fitted.yaml, runs: <runs root>}}: a candidate's fitted twin and trained
 # runs taken as they are (an earlier run's, workflow/scripts/judge_reuse.py), so neither is refitted nor retrained;
 # only what changed (e.g. the slide loop) reruns (docs/loop.md "Paper-profile run")
@@ -294,6 +304,8 @@ for _twin, _spec in JUDGE_REUSE.items():
 JUDGE_TRAINED = [t for t in (["calibrated"] + (["photo_loop"] if JUDGE_OWN_PHOTO else [])
                              + [f"slide_loop_{f}" for f in JUDGE_FOLDS])
                  if t not in JUDGE_REUSE]  # runs judge.smk trains (else photo_loop: the sweep's; reused: as given)
+# candidates whose Sim set judge_dataset simulates (calibrated's is the twin ablation's, simulate_dataset_calibrated)
+JUDGE_OWN_SETS = ([] if JUDGE_PHOTO_IS_MAIN else ["photo_loop"]) + [f"slide_loop_{f}" for f in JUDGE_FOLDS]
 JUDGE_RUN = str(run_dir(f"{JUDGE_DIR}/train/{{twin}}", "{exp}", "{clip_len}", "{seed}"))
 JUDGE_EXPERIMENTS = ["A-to-B", "A-to-C"]  # Sim -> Silicone (cross-fitted), Sim -> Meat: both train on Sim
 JUDGE_FILES = (
@@ -312,6 +324,15 @@ def judge_fit(twin):
     return f"{JUDGE_DIR}/twins/{twin}/twin_fit/fitted.yaml"
 
 
+def dataset_fit(wildcards=None):
+    """The fitted twin of the main Sim set (simulate_dataset) from dataset.twin: for auto the copy written by
+    twin_choice (the evidence's choice, judge.smk), else the pinned candidate's own fit (slide_loop: the first
+    fold's twin, as twin_choice takes it)."""
+    if DATASET_TWIN == "auto":
+        return rules.twin_choice.output.fit
+    return judge_fit(f"slide_loop_{JUDGE_FOLDS[0]}" if DATASET_TWIN == "slide_loop" else DATASET_TWIN)
+
+
 def judge_runs_root(twin):
     if twin in JUDGE_REUSE:
         return JUDGE_REUSE[twin]["runs"]
@@ -324,11 +345,12 @@ def judge_scores():
 
 
 def judge_sim(wildcards):
-    """A trained candidate's Sim set: the calibrated twin's is the twin ablation's (same draws), a fold twin's its own."""
+    """A trained candidate's Sim set: the calibrated twin's is the twin ablation's (same draws), photo_loop's the main
+    one where dataset.twin pins it there, every other its own (rule judge_dataset, the same draws)."""
     if wildcards.twin == "calibrated":
         return rules.simulate_dataset_calibrated.output.manifest
-    if wildcards.twin == "photo_loop":
-        return TRAIN_DATA["sim"]
+    if wildcards.twin == "photo_loop" and JUDGE_PHOTO_IS_MAIN:
+        return PHOTO_SIM
     return f"{JUDGE_DIR}/sim/{wildcards.twin}/manifest.json"
 
 

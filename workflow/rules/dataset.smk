@@ -1,5 +1,6 @@
 # The domain-randomised Sim dataset (SPEC §7, conf/dataset/sim.yaml): per trial heading, k_n, c_n drawn from one seeded
-# stream; even files over the vessel, odd without. Split 70/15/15 by sorted id at load time.
+# stream; even files over the vessel, odd without. Split 70/15/15 by sorted id at load time. Its twin: config
+# dataset.twin (auto: rule twin_choice in judge.smk, which needs only the candidates' held-out slide replays).
 DATASET = config["dataset"]
 
 
@@ -7,7 +8,9 @@ rule simulate_dataset:
     input:
         mesh=twin_mesh(),
         conf=conf_files("simulate", {"twin/mesh": config["twin_resolution"]}),
-        fit=rules.loop.output.fit,  # the residual loop's final twin sets every parameter the draws leave alone
+        # the fitted twin sets every parameter the draws leave alone: dataset.twin's (common.smk dataset_fit; auto:
+        # rule twin_choice's, the candidate the held-out real-slide MAE chooses, judge.smk)
+        fit=dataset_fit,
     output:
         manifest="results/sim/dataset/manifest.json",
     params:
@@ -20,6 +23,7 @@ rule simulate_dataset:
         seed=DATASET["seed"],
         recentre=str(DATASET["recentre_k_n"]).lower(),
         fit_args=lambda wildcards, input: fit_overrides(input.fit),
+        source=f"dataset.twin={DATASET_TWIN}",  # logged: which twin, chosen or pinned
     resources:
         gpu=GPU,
     log:
@@ -29,11 +33,12 @@ rule simulate_dataset:
     conda:
         CONDA_ENV
     shell:
-        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.simulate set=randomised"
+        "echo 'Sim set twin: {params.source}, fit {input.fit}' > {log};"
+        " SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.simulate set=randomised"
         " n_pairs={params.n_pairs} seed={params.seed}"
         " dataset.recentre_k_n={params.recentre}"
         " {params.twin} {params.fit_args} mesh={input.mesh} out.dir={params.outdir}"
-        " {params.hydra} > {log} 2>&1"
+        " {params.hydra} >> {log} 2>&1"
 
 
 # Ablation (train.twin_ablation): the same draws simulated with the calibration-only twin, the one
@@ -47,6 +52,7 @@ use rule simulate_dataset as simulate_dataset_calibrated with:
         manifest="results/sim/dataset_calibrated/manifest.json",
     params:
         rule="simulate_dataset_calibrated",
+        source="the calibration's twin (twin ablation, judge candidate calibrated)",
     log:
         "results/logs/sim/simulate_dataset_calibrated.log",
     benchmark:

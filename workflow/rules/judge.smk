@@ -2,8 +2,10 @@
 # A-to-B / A-to-C models (judge.seeds); Silicone trials are scored cross-fitted (a fold twin's models only on
 # the other fold's trials); the twin is chosen by its held-out real-slide motion MAE (no test labels).
 # Candidates: calibrated (calibrate.smk), photo_loop (loop.smk), slide_loop_odd / slide_loop_even (the
-# slide loop's fold twins, slides.smk). Reuses what exists: photo_loop's runs = the main sweep (results/train),
-# calibrated's Sim set = the twin ablation's (dataset.smk); calibrated and the fold twins train here
+# slide loop's fold twins, slides.smk). Reuses what exists: photo_loop's runs = the main sweep (results/train) where
+# dataset.twin pins the main Sim set to photo_loop and judge.recipe is the sweep's; calibrated's Sim set = the twin
+# ablation's (dataset.smk). Rule twin_choice picks the main Sim set's twin for dataset.twin auto (common.smk
+# dataset_fit) from the replays alone. calibrated and the fold twins train here
 # (results/judge/train/<twin>), all seeds of a configuration in one process where train.seeds_together.
 # Needs common.smk (JUDGE*, judge_* helpers, PY, TWIN_ARGS, fit_overrides, hydra_dir) and the rule files above.
 # Opt-in: judge.seeds [] (quick, tiny) leaves it out of `all`; the paper profile turns it on, and
@@ -69,22 +71,54 @@ rule judge_slides:
         " mesh={input.mesh} out.json={output.json} out.npz={output.npz} {params.hydra} > {log} 2>&1"
 
 
-# A fold twin's Sim set: the same draws as rule simulate_dataset, simulated with that twin.
+# A candidate's own Sim set (JUDGE_OWN_SETS: the fold twins, and photo_loop where the main set is not pinned to it):
+# the same draws as rule simulate_dataset, simulated with that twin.
 use rule simulate_dataset as judge_dataset with:
     input:
         mesh=twin_mesh(),
         conf=rules.simulate_dataset.input.conf,
-        fit=f"{JUDGE_DIR}/twins/slide_loop_{{fold}}/twin_fit/fitted.yaml",
+        fit=lambda wildcards: judge_fit(wildcards.twin),
     output:
-        manifest=f"{JUDGE_DIR}/sim/slide_loop_{{fold}}/manifest.json",
+        manifest=f"{JUDGE_DIR}/sim/{{twin}}/manifest.json",
     wildcard_constraints:
-        fold="|".join(JUDGE_FOLDS),
+        twin="|".join(JUDGE_OWN_SETS),
     params:
         rule="judge_dataset",
+        source=lambda wildcards: f"judge candidate {wildcards.twin}",
     log:
-        "results/logs/judge/dataset_slide_loop_{fold}.log",
+        "results/logs/judge/dataset_{twin}.log",
     benchmark:
-        f"results/benchmarks/judge_dataset/dataset_slide_loop_{{fold}}.tsv",
+        f"results/benchmarks/judge_dataset/dataset_{{twin}}.tsv",
+
+
+# The main Sim set's twin (dataset.twin auto; docs/loop.md "Which twin makes the Sim set"): the candidate the held-out
+# slide MAE chooses (report.twin_selection.pick, the table's own function), from the replays alone, so rule
+# simulate_dataset waits for the slide loop and the replays but for no training. Its fitted.yaml is the chosen twin's.
+rule twin_choice:
+    input:
+        slides=expand(rules.judge_slides.output.json, twin=JUDGE_TWINS),
+        fits=[judge_fit(t) for t in JUDGE_TWINS],
+        conf=JUDGE_CONF,
+    output:
+        fit=f"{JUDGE_DIR}/choice/twin_fit/fitted.yaml",
+        json=f"{JUDGE_DIR}/choice/choice.json",
+    params:
+        rule="twin_choice",
+        py=PY,
+        twin=DATASET_TWIN,
+        slides=" ".join(f"slides.{t}={JUDGE_DIR}/slides/{t}.json" for t in JUDGE_TWINS),
+        fits=" ".join(f"fits.{t}={judge_fit(t)}" for t in JUDGE_TWINS),
+        hydra=lambda wildcards, output: hydra_dir(output.json),
+    log:
+        "results/logs/judge/twin_choice.log",
+    benchmark:
+        "results/benchmarks/twin_choice.tsv",
+    conda:
+        CONDA_ENV
+    shell:
+        "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.twin_judge task=choice dataset_twin={params.twin}"
+        " {params.slides} {params.fits} out.choice={output.json} out.choice_fit={output.fit} {params.hydra}"
+        " > {log} 2>&1"
 
 
 use rule train as judge_train with:
@@ -164,6 +198,7 @@ rule twin_selection:
         slides=expand(rules.judge_slides.output.json, twin=JUDGE_TWINS),
         markers=expand(rules.judge_slides.output.npz, twin=JUDGE_TWINS),  # the figure's replay
         scores=judge_scores(),
+        choice=rules.twin_choice.output.json,  # the table checks it names the same twin
         npz=rules.silicone_sequences.output.npz,
         conf=JUDGE_CONF,
     output:
@@ -192,5 +227,5 @@ rule twin_selection:
     shell:
         "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.twin_judge task=table profile={params.profile}"
         " 'seeds={params.seeds}' clip_len={params.clip_len} trained_with={params.recipe} sequences={params.stem}"
-        " {params.runs} {params.slides}"
+        " {params.runs} {params.slides} choice={input.choice}"
         " out.csv={output.csv} out.md={output.md} out.figure={params.figure} {params.hydra} > {log} 2>&1"

@@ -160,7 +160,8 @@ rule train_report:
 
 
 # Dataset-twin ablation (train.twin_ablation: {experiments, seeds}; empty seeds skip it): the same
-# models trained on Sim data from the calibration-only twin, beside the main sweep's loop-twin data.
+# models trained on Sim data from the calibration-only twin, beside the photo loop's twin's data (the main sweep's
+# where dataset.twin is photo_loop).
 # The calibrated twin's Sim set is rule simulate_dataset_calibrated's (dataset.smk), looked up when a job
 # needs it.
 use rule train as train_twin_ablation with:
@@ -180,9 +181,30 @@ use rule train as train_twin_ablation with:
         overrides=lambda wildcards: train_overrides(wildcards, rules.simulate_dataset_calibrated.output.manifest),
 
 
+# Its `loop` row where dataset.twin is not photo_loop (the main sweep then trains on another twin's Sim set): the same
+# models on the photo loop's own Sim set (rule judge_dataset, the same draws), so the row keeps its meaning.
+if TWIN_ABL_LOOP_RUN != TRAIN_RUN:
+
+    use rule train as train_twin_ablation_loop with:
+        input:
+            unpack(lambda wildcards: train_inputs(wildcards, PHOTO_SIM)),
+        output:
+            metrics=f"{TWIN_ABL_LOOP_RUN}/metrics.json",
+            scores=f"{TWIN_ABL_LOOP_RUN}/scores.npz",
+            pr=f"{TWIN_ABL_LOOP_RUN}/pr.npz",
+            checkpoint=f"{TWIN_ABL_LOOP_RUN}/checkpoint.pt",
+        log:
+            "results/logs/train/twin_loop_{exp}_L{clip_len}_seed{seed}.log",
+        benchmark:
+            f"results/benchmarks/train_twin_ablation_loop/twin_loop_{{exp}}_L{{clip_len}}_seed{{seed}}.tsv",
+        params:
+            rule="train_twin_ablation_loop",
+            overrides=lambda wildcards: train_overrides(wildcards, PHOTO_SIM),
+
+
 rule twin_ablation_report:
     input:
-        loop=twin_ablation_runs(TRAIN_RUN),
+        loop=twin_ablation_runs(TWIN_ABL_LOOP_RUN),
         calibrated=twin_ablation_runs(TWIN_ABL_RUN),
         conf=conf_files("twin_ablation"),
     output:

@@ -12,7 +12,8 @@
 # still running; else Snakemake's status. Poll: LIMIT_S=550 bash workflow/scripts/gpu_judge.sh results/judge_gpu
 # until it exits 0, then cp results/judge_gpu/* $OUT/
 # OUTDIR then holds twin_selection.csv and loop_slides.csv (copy both to docs/results/), twin_selection.md,
-# slide_motion.png/.pdf, slide_loop.json (results page section "Twin on the task") and judge_logs.tgz.
+# slide_motion.png/.pdf, slide_loop.json (results page section "Twin on the task"), choice.json (rule twin_choice:
+# the main Sim set's twin, docs/loop.md "Which twin makes the Sim set") and judge_logs.tgz.
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/device_run.sh"  # the detached, resumable run (pid guard, unlock, LIMIT_S)
 out=${1:?usage: gpu_judge.sh OUTDIR [snakemake args...]}; shift
@@ -43,7 +44,8 @@ device_wait "$out" snakemake
 rc=$DEVICE_RC
 device_progress "$out" snakemake
 for f in results/judge/twin_selection.csv results/judge/twin_selection.md results/judge/slide_motion.png \
-  results/judge/slide_motion.pdf results/loop_slides/loop_slides.csv results/loop_slides/slide_loop.json; do
+  results/judge/slide_motion.pdf results/loop_slides/loop_slides.csv results/loop_slides/slide_loop.json \
+  results/judge/choice/choice.json; do
   if [ -f "$f" ]; then cp "$f" "$out/"; else rm -f "$out/$(basename "$f")"; fi  # no stale copy
 done
 tar czf "$out/judge_logs.tgz" results/logs results/judge/slides/*.json \

@@ -16,9 +16,10 @@
 #   TREE=DIR runs in a private copy of this working tree at DIR (made once; results/ is not copied, only the
 #     carried inputs results/twin/mesh_*, results/data/photos), so another Snakemake in the repo root (the judge)
 #     holds no lock this run needs. OUTDIR is taken relative to the repo root, before the switch.
-#   LOOP_FROM=PATH (a results/loop folder, or a .tgz holding results/loop/): the Sim set's twin is that loop's
-#     fit, installed as results/loop and marked newer than its inputs so rule loop does not rerun; the earlier
-#     sessions' rows were trained on the Sim set of docs/results/paper/loop/twin_fit/fitted.yaml.
+#   LOOP_FROM=PATH (a results/loop folder, or a .tgz holding results/loop/; needs TREE): the Sim set's twin is that
+#     loop's fit (the tree's profile pinned to dataset.twin photo_loop), installed as results/loop and marked newer
+#     than its inputs so rule loop does not rerun; the earlier sessions' rows were trained on the Sim set of
+#     docs/results/paper/loop/twin_fit/fitted.yaml.
 #   GPU_SLOTS=N lets N GPU jobs share the card (the profile's gpu=4); CORES overrides the profile's cores
 #     (Snakemake counts 4 threads a training job: five jobs at once need CORES=20 on the 16-core host).
 set -uo pipefail
@@ -67,6 +68,15 @@ if [ -n "${LOOP_FROM:-}" ] && [ ! -f results/loop/.carried ]; then
        mkdir -p results && cp -a "$src" results/loop ;;
   esac
   sleep 1; find results/loop -exec touch {} +; touch results/loop/.carried
+  # the main Sim set is the carried loop's twin only where dataset.twin pins photo_loop (the paper profile's auto
+  # would take rule twin_choice's): pin it in the private tree's profile, never in the repo root's
+  if [ -z "${TREE:-}" ]; then
+    echo "gpu_recipe_ablation: LOOP_FROM pins the Sim set to the carried loop (dataset.twin photo_loop) in a private copy: give TREE=DIR" >&2
+    exit 2
+  fi
+  sed -i 's/^  twin: auto\b.*/  twin: photo_loop   # pinned by gpu_recipe_ablation.sh LOOP_FROM/' "conf/workflow/$profile.yaml"
+  grep -q '^  twin: photo_loop' "conf/workflow/$profile.yaml" || {
+    echo "gpu_recipe_ablation: conf/workflow/$profile.yaml: dataset.twin is not photo_loop; set it for LOOP_FROM" >&2; exit 2; }
   echo "Sim set's twin: carried loop fit $(sha256sum results/loop/twin_fit/fitted.yaml | cut -c1-16)"
 fi
 snake_opts=()

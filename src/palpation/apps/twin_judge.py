@@ -5,6 +5,9 @@ task=fold_twin -> `out.fit`: the slide loop's `fold` twin as a twin option (twin
 task=slides    -> `out.json` + `out.npz`: the composed twin (twin=..., +twin_fit=...) replayed along the
                  Silicone slides of the slide loop's cut it never saw (all of them, or the other fold's
                  with `fold`): per-trial motion MAE px and over-/off-vessel ratios, sim markers.
+task=choice    -> `out.choice` (choice.json: candidates, MAEs, p, chosen, why) + `out.choice_fit`: the main Sim set's
+                 twin (dataset_twin: auto = the evidence's choice by the held-out slide MAE, or a pinned candidate),
+                 from the replays alone (report.twin_selection.sim_set_choice, the table's own choice function).
 task=table     -> `out.csv` + `out.md` (report.twin_selection: one row per candidate, `chosen` by the held-out
                  slide MAE with the tie rule: simplest first), `out.figure` (.png/.pdf: real vs the chosen twin's motion over one trial).
 """
@@ -28,7 +31,8 @@ from palpation.measured_sequences import load_sequence_set
 from palpation.metrics.scores import load_scores
 from palpation.report.markdown import markdown
 from palpation.report.runs import run_dir
-from palpation.report.twin_selection import COLUMNS, TIE_ALPHA, TIE_TEST, Candidate, Member, selection_table
+from palpation.report.twin_selection import (COLUMNS, TIE_ALPHA, TIE_TEST, Candidate, Member, selection_table,
+                                             sim_set_choice)
 
 log = logging.getLogger(__name__)
 
@@ -84,10 +88,10 @@ def _member(c: dict, name: str, fold: str | None, n_trials: int) -> Member:
     return Member(own, scores["silicone"], scores["meat"])
 
 
-def table(cfg: DictConfig) -> dict:
-    c = OmegaConf.to_container(cfg, resolve=True)
+def _candidates(c: dict, with_runs: bool = True) -> tuple[list[Candidate], dict]:
+    """The candidates (conf order: simplest first) from their replays; their models' scores `with_runs`."""
     candidates, replays = [], {}
-    n_trials = load_sequence_set(c["sequences"]).n_trials
+    n_trials = load_sequence_set(c["sequences"]).n_trials if with_runs else 0
     for name, spec in c["candidates"].items():
         folds = spec.get("folds") or [None]
         reps = [read_json(c["slides"][name if f is None else f"{name}_{f}"], "rerun rule judge_slides")
@@ -96,22 +100,64 @@ def table(cfg: DictConfig) -> dict:
         trials = [t for r in reps for t in r["trials"]]
         mae = [m for r in reps for m in r["mae_px"]]
         candidates.append(Candidate(
-            twin=name, fitted_on=spec["fitted_on"], members=[_member(c, name, f, n_trials) for f in folds],
+            twin=name, fitted_on=spec["fitted_on"],
+            members=[_member(c, name, f, n_trials) for f in folds] if with_runs else [],
             heldout_slide_mae_px=float(np.mean(mae)) if mae else float("nan"),
             vessel_ratio_sim=float(np.mean([r["vessel_ratio_sim"] for r in reps])),
             vessel_ratio_real=float(np.mean([r["vessel_ratio_real"] for r in reps])),
             trial_mae_px={int(t): float(m) for t, m in zip(trials, mae)}))
         log.info("%s: held-out slide motion MAE %.3f px over trials %s", name, candidates[-1].heldout_slide_mae_px,
                  sorted(trials))
+    return candidates, replays
+
+
+def choice(cfg: DictConfig) -> dict:
+    """The main Sim set's twin (rule twin_choice): `out.choice` (choice.json) and the twin's fitted.yaml copied to
+    `out.choice_fit`. Reads the held-out replays only, so it runs before (and without) any training."""
+    c = OmegaConf.to_container(cfg, resolve=True)
+    candidates, _ = _candidates(c, with_runs=False)
+    rec = sim_set_choice(candidates, str(c["dataset_twin"]))
+    folds = c["candidates"][rec["sim_set_twin"]].get("folds")
+    # a slide-loop row is two fold twins; one Sim set takes the first fold's (it saw that fold's Silicone trials)
+    source = rec["sim_set_twin"] if not folds else f"{rec['sim_set_twin']}_{folds[0]}"
+    if source not in c["fits"]:
+        raise ValueError(f"twin_judge task=choice: no fitted twin for {source!r} under `fits` "
+                         f"(has {sorted(c['fits'])}); pass fits.{source}=<dir>/twin_fit/fitted.yaml")
+    rec["fit"] = str(c["fits"][source])
+    if folds:
+        rec["note"] = (f"fold {folds[0]}'s twin, fitted on that fold's Silicone trials: the main tables' Silicone "
+                       "scores are then not cross-fitted for them (the judge's table is)")
+    text = Path(rec["fit"]).read_text()
+    head, _, body = text.partition("\n")
+    if not head.startswith("# @package"):
+        raise ValueError(f"{rec['fit']}: not a twin option (first line {head!r}, need '# @package twin'); "
+                         "rerun the rule that writes it")
+    save_text(c["out"]["choice_fit"], f"{head}\n# Main Sim set's twin ({rec['how']}), copied by twin_judge task=choice "
+                                      f"from {rec['fit']}\n{body}")
+    save_json(c["out"]["choice"], rec)
+    log.info("main Sim set twin: %s (%s; %s) -> %s", rec["sim_set_twin"], rec["how"],
+             next(r["why"] for r in rec["candidates"] if r["twin"] == rec["chosen"]), c["out"]["choice_fit"])
+    return rec
+
+
+def table(cfg: DictConfig) -> dict:
+    c = OmegaConf.to_container(cfg, resolve=True)
+    candidates, replays = _candidates(c)
     df = selection_table(candidates)  # candidates in conf order: simplest first (the tie rule's order)
+    chosen = str(df.loc[df["chosen"], "twin"].iloc[0])
+    made = read_json(c["choice"], "rerun rule twin_choice") if c.get("choice") else None
+    if made and made["chosen"] != chosen:  # rule twin_choice's record: the same function, the same replays
+        raise ValueError(f"{c['choice']} chose {made['chosen']} but the table chooses {chosen} from the same replays; "
+                         "rerun rule twin_choice (its replays are older or newer than the table's)")
     save_text(c["out"]["csv"], csv_text(df.to_dict("records"), COLUMNS, 4, na_rep="nan"))
     rows = [[str(r[k]).replace("|", "/") if not isinstance(r[k], float) else f"{r[k]:.3f}" for k in COLUMNS]
             for r in df.to_dict("records")]
     note = f"Models: recipe {c['trained_with']}, every candidate alike.\n\n" if c.get("trained_with") else ""
     note += (f"Choice: the simplest twin (rows top to bottom) unless a more complex one has a significantly lower "
              f"held-out slide MAE ({TIE_TEST}, alpha {TIE_ALPHA:g}); `why` gives each row's test.\n\n")
+    if made:
+        note += f"The main Sim set's twin: {made['sim_set_twin']} ({made['how']}; config dataset.twin).\n\n"
     save_text(c["out"]["md"], f"# Twin on the task ({c['profile']} profile)\n\n{note}" + markdown(list(COLUMNS), rows))
-    chosen = str(df.loc[df["chosen"], "twin"].iloc[0])
     _figure(c, chosen, replays[chosen])
     log.info("twin selection: chosen %s -> %s", chosen, c["out"]["csv"])
     return {"chosen": chosen, "rows": df.to_dict("records")}
@@ -134,7 +180,7 @@ def _figure(c: dict, chosen: str, reps: list[dict]) -> None:
                         c["out"]["figure"], f"Silicone trial {trial}, {chosen} twin")
 
 
-TASKS = {"fold_twin": fold_twin, "slides": slides, "table": table}
+TASKS = {"fold_twin": fold_twin, "slides": slides, "choice": choice, "table": table}
 
 
 def run(cfg: DictConfig) -> dict:

@@ -30,6 +30,8 @@ COLUMNS = ("twin", "fitted_on", "heldout_slide_mae_px", "vessel_ratio_sim", "ves
 # test because the per-trial MAE has outlying trials (Silicone trial 1: 3.6 px against ~1.5 px).
 TIE_ALPHA = 0.05
 TIE_TEST = "one-sided Wilcoxon signed-rank on the per-trial held-out slide MAE"
+# config dataset.twin (workflow/rules/judge.smk, rule twin_choice): the evidence's choice or a pinned candidate
+DATASET_TWINS = ("auto", "calibrated", "photo_loop", "slide_loop")
 
 
 @dataclass
@@ -138,23 +140,49 @@ def choose(candidates: list[Candidate], alpha: float = TIE_ALPHA) -> tuple[int, 
     return best, ps, why
 
 
-def selection_table(candidates: list[Candidate], alpha: float = TIE_ALPHA) -> pd.DataFrame:
-    """One row per candidate (simplest first); `chosen` by the held-out slide motion MAE with the tie rule
-    (`choose`); without per-trial MAE (older replays) the lowest mean. Test labels play no part."""
+def pick(candidates: list[Candidate], alpha: float = TIE_ALPHA) -> tuple[int, list[float], list[str]]:
+    """The evidence's choice, the one function the table and the Sim-set choice (`sim_set_choice`) share: the tie
+    rule (`choose`) where every candidate has per-trial held-out MAE, else (older replays) the lowest mean."""
     if not candidates:
         raise ValueError("twin selection: no candidate twins")
     names = [c.twin for c in candidates]
     if len(set(names)) != len(names):
         raise ValueError(f"twin selection: candidate names repeat: {names}")
-    table = pd.DataFrame([candidate_row(c) for c in candidates], columns=list(COLUMNS))
-    mae = table["heldout_slide_mae_px"].to_numpy(float)
+    mae = np.array([c.heldout_slide_mae_px for c in candidates], float)
     if not np.isfinite(mae).any():
         raise ValueError("twin selection: no candidate has a finite held-out slide MAE to choose by")
     if all(c.trial_mae_px for c in candidates):
-        best, ps, why = choose(candidates, alpha)
-        table["p_vs_simpler"], table["why"] = ps, why
-    else:
-        best = int(np.nanargmin(mae))
-        table.loc[best, "why"] = "chosen: lowest mean held-out slide MAE (no per-trial MAE for the tie rule)"
+        return choose(candidates, alpha)
+    best, why = int(np.nanargmin(mae)), [""] * len(candidates)
+    why[best] = "chosen: lowest mean held-out slide MAE (no per-trial MAE for the tie rule)"
+    return best, [float("nan")] * len(candidates), why
+
+
+def selection_table(candidates: list[Candidate], alpha: float = TIE_ALPHA) -> pd.DataFrame:
+    """One row per candidate (simplest first); `chosen` by the held-out slide motion MAE (`pick`). Test labels
+    play no part."""
+    best, ps, why = pick(candidates, alpha)
+    table = pd.DataFrame([candidate_row(c) for c in candidates], columns=list(COLUMNS))
+    table["p_vs_simpler"], table["why"] = ps, why
     table.loc[best, "chosen"] = True
     return table
+
+
+def sim_set_choice(candidates: list[Candidate], twin: str = "auto", alpha: float = TIE_ALPHA) -> dict:
+    """Which twin simulates the main Sim set (config dataset.twin): `auto` takes the evidence's choice (`pick`),
+    a candidate's name pins it (the evidence is still recorded). Needs the replays only, no detector score."""
+    names = [c.twin for c in candidates]
+    if twin not in DATASET_TWINS:
+        raise ValueError(f"config dataset.twin: unknown value {twin!r}; use one of {', '.join(DATASET_TWINS)} "
+                         "(conf/workflow/<profile>.yaml)")
+    if twin != "auto" and twin not in names:
+        raise ValueError(f"config dataset.twin: {twin!r} is not a judged candidate ({', '.join(names)}); "
+                         "pin one of them or use auto")
+    best, ps, why = pick(candidates, alpha)
+    rows = [{"twin": c.twin, "heldout_slide_mae_px": c.heldout_slide_mae_px, "trial_mae_px": c.trial_mae_px or {},
+             "p_vs_simpler": p, "why": w} for c, p, w in zip(candidates, ps, why)]
+    used = names[best] if twin == "auto" else twin
+    how = "the evidence's choice" if twin == "auto" else f"pinned by dataset.twin (the evidence chose {names[best]})"
+    return {"dataset_twin": twin, "chosen": names[best], "sim_set_twin": used, "pinned": twin != "auto",
+            "how": how, "rule": f"simplest first, replaced only if significantly better ({TIE_TEST}, alpha {alpha:g})",
+            "candidates": rows}
