@@ -349,7 +349,7 @@ def judge_sim(wildcards):
     one where dataset.twin pins it there, every other its own (rule judge_dataset, the same draws)."""
     if wildcards.twin == "calibrated":
         return rules.simulate_dataset_calibrated.output.manifest
-    if wildcards.twin == "photo_loop" and JUDGE_PHOTO_IS_MAIN:
+    if wildcards.twin == "photo_loop":
         return PHOTO_SIM
     return f"{JUDGE_DIR}/sim/{wildcards.twin}/manifest.json"
 

@@ -54,12 +54,15 @@ if [ -n "${TREE:-}" ]; then
 fi
 device_touch_mesh "$profile"
 if [ -n "${LOOP_FROM:-}" ] && [ ! -f results/loop/.carried ]; then
+  # LOOP_FROM replaces results/loop and pins the profile's dataset.twin to photo_loop (the paper profile's auto would
+  # take rule twin_choice's twin): only in a private copy, never in the repo root, and refused before touching either
+  if [ -z "${TREE:-}" ]; then
+    echo "gpu_recipe_ablation: LOOP_FROM replaces results/loop and pins dataset.twin photo_loop: give TREE=DIR (a private copy)" >&2
+    exit 2
+  fi
   src=$LOOP_FROM; [ -e "$src" ] || src="$OLDPWD/$LOOP_FROM"  # relative to the repo root, as OUTDIR
   # the loop's inputs (the carried photo measurements) older than its outputs: neither reruns
   [ -d results/data/photos ] && touch results/data/photos/*
-  if [ -z "${TREE:-}" ] && [ -e results/loop ]; then
-    echo "gpu_recipe_ablation: LOOP_FROM would replace results/loop here; give TREE=DIR (a private copy)" >&2; exit 2
-  fi
   rm -rf results/loop
   case "$src" in
     *.tgz|*.tar.gz) tar -xzf "$src" results/loop || exit 2 ;;
@@ -68,12 +71,6 @@ if [ -n "${LOOP_FROM:-}" ] && [ ! -f results/loop/.carried ]; then
        mkdir -p results && cp -a "$src" results/loop ;;
   esac
   sleep 1; find results/loop -exec touch {} +; touch results/loop/.carried
-  # the main Sim set is the carried loop's twin only where dataset.twin pins photo_loop (the paper profile's auto
-  # would take rule twin_choice's): pin it in the private tree's profile, never in the repo root's
-  if [ -z "${TREE:-}" ]; then
-    echo "gpu_recipe_ablation: LOOP_FROM pins the Sim set to the carried loop (dataset.twin photo_loop) in a private copy: give TREE=DIR" >&2
-    exit 2
-  fi
   sed -i 's/^  twin: auto\b.*/  twin: photo_loop   # pinned by gpu_recipe_ablation.sh LOOP_FROM/' "conf/workflow/$profile.yaml"
   grep -q '^  twin: photo_loop' "conf/workflow/$profile.yaml" || {
     echo "gpu_recipe_ablation: conf/workflow/$profile.yaml: dataset.twin is not photo_loop; set it for LOOP_FROM" >&2; exit 2; }

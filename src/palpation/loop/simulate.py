@@ -145,8 +145,8 @@ class LoopSimulator:
         side, the longest first) and keep them in the cache; returns {key: (nodes, pose, failed)}."""
         groups = [todo] if not self.split else [[u for u in todo if u[0] == k]
                                                 for k in dict.fromkeys(u[0] for u in todo)]
-        parts = [part for g in groups if g for part in np.array_split(np.arange(len(g)), min(self.workers, len(g)))
-                 for part in [[g[i] for i in part]]]
+        parts = [[g[i] for i in ix] for g in groups if g
+                 for ix in np.array_split(np.arange(len(g)), min(self.workers, len(g)))]
         work = [len(p) * self._frames(p[0]) for p in parts]  # env-frames: a part's cost on a CPU
         order = sorted(range(len(parts)), key=lambda i: -work[i])
         parts, work = [parts[i] for i in order], [work[i] for i in order]
@@ -163,11 +163,16 @@ class LoopSimulator:
 
     def _frames(self, key: tuple) -> int:
         """Frames of one env's schedule (set by its kind and geometry; planned once)."""
+        geometry = key[:4]
+        if geometry not in self._lengths:
+            plan = plan_requests(self.mesh, self.cfg, [self._request(key)], self.max_frames)[0]
+            self._lengths[geometry] = plan.n_frames
+        return self._lengths[geometry]
+
+    def _request(self, key: tuple) -> EnvRequest:
+        """The twin request of one distinct physics key (kind, depth, angle, heading, params, mount)."""
         kind, d, a, h, params, _ = key
-        if (kind, d, a, h) not in self._lengths:
-            req = EnvRequest(kind, h, depth_mm=d, angle_deg=a, record="last", **dict(params)).resolved(self.cfg)
-            self._lengths[kind, d, a, h] = plan_requests(self.mesh, self.cfg, [req], self.max_frames)[0].n_frames
-        return self._lengths[kind, d, a, h]
+        return EnvRequest(kind, h, depth_mm=d, angle_deg=a, record="last", **dict(params)).resolved(self.cfg)
 
     def _remember(self, key: tuple, value: tuple) -> None:
         size = value[0].nbytes + value[1].nbytes
@@ -181,8 +186,7 @@ class LoopSimulator:
 
     def _run(self, group: list[tuple]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Simulate distinct physics to their last frame: final nodes (n, N, 3), poses, failed flags."""
-        reqs = [EnvRequest(k, h, depth_mm=d, angle_deg=a, record="last", **dict(params)).resolved(self.cfg)
-                for k, d, a, h, params, _ in group]
+        reqs = [self._request(key) for key in group]
         trajs = plan_requests(self.mesh, self.cfg, reqs, self.max_frames)
         trajs = [with_mount(t, mount_offset(**{"dz_m" if k == "dz" else k: v for k, v in mount}))
                  if mount else t for t, (*_, mount) in zip(trajs, group)]
