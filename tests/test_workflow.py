@@ -54,7 +54,8 @@ def test_dry_run_lists_the_whole_dag(tmp_path, default_listing):
     # what `rule all` names (rules.<name>.output; TRAIN_REPORT_FILES is train_report's) plus their upstream
     rule_all = (REPO_ROOT / "Snakefile").read_text().split("rule all:")[1].split("\nrule ")[0]
     named = set(re.findall(r"rules\.(\w+)\.output", rule_all))
-    upstream = {"mesh", "simulate_canonical", "simulate_vessel_slide", "simulate_dataset", "train", "train_report"}
+    upstream = {"mesh", "simulate_canonical", "simulate_vessel_slide", "simulate_dataset", "train", "train_report",
+                "train_shared_sim_large"}  # A-to-A, A-to-B and A-to-C: one training per seed (train_groups)
     quick = yaml.safe_load((REPO_ROOT / "conf" / "workflow" / "quick.yaml").read_text())
     if quick["train"]["recipe_ablation"]["seeds"]:  # RECIPE_REPORT_FILES, empty where the profile skips it
         upstream |= {"train_recipe", "recipe_report", "recipe_crossfit"}  # quick's A-to-B/A-to-C are partners
@@ -73,10 +74,13 @@ def test_dry_run_lists_the_whole_dag(tmp_path, default_listing):
 
 def test_train_command_carries_the_profile_sizes_and_recipe(tmp_path):
     """Every size knob of conf/workflow/quick.yaml reaches the train command, a null one as null (the whole
-    split; dropping it would leave the recipe's own value), with the profile's recipe and threads."""
+    split; dropping it would leave the recipe's own value), with the profile's recipe and threads. A-to-B at the
+    profile's clip length is trained by A-to-A's job (rule train_shared_sim_large), which scores it too."""
     quick = yaml.safe_load((REPO_ROOT / "conf" / "workflow" / "quick.yaml").read_text())["train"]
     listing = dry_run(tmp_path, "-p", "results/train/A-to-B/L5/seed0/metrics.json")
-    (line,) = [ln for ln in listing.splitlines() if "palpation.apps.train experiment=A-to-B" in ln]
+    (line,) = [ln for ln in listing.splitlines() if "palpation.apps.train experiment=A-to-A" in ln]
+    assert "'also_test=[A-to-B:silicone,A-to-C:meat]' " in line and "data.silicone=" in line
+    assert " seed=0 " in line and "hydra.run.dir=results/train/A-to-A/L5/seed0 " in line
     for k, v in quick["sizes"]["large"].items():
         assert f"train.{k}={'null' if v is None else v} " in line
     assert f"recipe={quick['recipe']} " in line and f"OMP_NUM_THREADS={quick['threads']} " in line

@@ -199,9 +199,41 @@ def test_robust_seeds_together_and_shared_test_sets_match_separate_runs(train_se
     assert together[0]["test"]["ap"] != together[1]["test"]["ap"]
 
 
-def test_also_test_needs_seeds_and_the_run_layout(train_sets, tmp_path):
-    with pytest.raises(ValueError, match="pass seeds="):
-        run(compose_train(["experiment=A-to-B", "also_test=[A-to-C:meat]", "tracking=false"]), tmp_path)
+def test_one_seed_scored_on_several_test_sets_is_byte_for_byte_its_own_runs(train_sets, tmp_path, results_tmp,
+                                                                           monkeypatch):
+    """Rule train_shared_* without seeds_together (the quick profile): A-to-A's model of one seed trained once and
+    scored on Sim, Silicone and Meat writes what A-to-A, A-to-B and A-to-C each trained alone write, byte for byte
+    (training reads no test set), apart from metrics.json's timings and `trained_together`."""
+    monkeypatch.chdir(tmp_path)
+    paths = [f"data.{k}={v}" for k, v in train_sets.items()]
+    tiny = ["model=compact", "seed=1", "clip_len=2", *TINY, "recipe=quick", *paths]
+    shared = run(compose_train(["experiment=A-to-A", "also_test=[A-to-B:silicone,A-to-C:meat]", *tiny]),
+                 tmp_path / "shared" / "A-to-A" / "L2" / "seed1")
+    import mlflow  # one MLflow run per configuration, each with the training's loss history
+
+    mlflow.set_tracking_uri(f"sqlite:///{results_tmp / 'mlflow.db'}")
+    runs = mlflow.search_runs(experiment_names=["train"], output_format="list")
+    assert sorted(r.data.tags["config"] for r in runs) == ["A-to-A", "A-to-B", "A-to-C"]
+    losses = [[m.value for m in mlflow.MlflowClient().get_metric_history(r.info.run_id, "train/loss")] for r in runs]
+    assert losses[0] and losses[0] == losses[1] == losses[2]
+    tiny.append("tracking=false")
+    assert [m["config"] for m in shared] == ["A-to-A", "A-to-B", "A-to-C"]
+    assert shared[2]["trained_together"]["configs"] == ["A-to-A", "A-to-B", "A-to-C"]
+    timing = ("train_seconds", "test_seconds", "trained_together")
+    for m in shared:
+        exp = m["config"]
+        alone = run(compose_train([f"experiment={exp}", *tiny]), tmp_path / "alone" / exp)
+        pair = (tmp_path / "shared" / exp / "L2" / "seed1", tmp_path / "alone" / exp)
+        for name in ("scores.npz", "pr.npz", "checkpoint.pt"):
+            assert (pair[0] / name).read_bytes() == (pair[1] / name).read_bytes(), (exp, name)
+        assert {k: v for k, v in m.items() if k not in timing} == {k: v for k, v in alone.items() if k not in timing}
+    with pytest.raises(ValueError, match="needs the run dir <root>/A-to-A/L2/seed1"):
+        run(compose_train(["experiment=A-to-A", "also_test=[A-to-B:silicone]", *tiny]), tmp_path / "elsewhere")
+
+
+def test_also_test_needs_the_run_layout(train_sets, tmp_path):
+    with pytest.raises(ValueError, match="also_uncalibrated uses the models of `seeds`"):
+        run(compose_train(["experiment=A-to-B", "also_uncalibrated=x", "tracking=false"]), tmp_path)
     with pytest.raises(ValueError, match="calibrates nothing"):
         run(compose_train(["experiment=A-to-B", "seeds=[0]", "also_uncalibrated=x", "tracking=false"]), tmp_path)
     with pytest.raises(ValueError, match="needs the run dir <root>/A-to-B/L5"):

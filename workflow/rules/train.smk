@@ -98,6 +98,57 @@ if TRAIN["seeds_together"]:
     ruleorder: train_seeds > train
 
 
+# Configurations that train alike (train_groups: A-to-A, A-to-B and A-to-C all train the large model on Sim) train
+# once and score every test set (app key also_test), at the profile's clip length: one job per seed, or per group
+# with train.seeds_together. Each keeps its run folder and MLflow run; one seed's outputs are byte for byte rule
+# train's (tests/apps/test_train_app.py). The clip-length ablation's other lengths still train through rule train.
+for _group, _exps in train_groups(TRAIN["experiments"]).items():
+    if len(_exps) < 2:
+        continue
+    _together = TRAIN["seeds_together"]
+
+    rule:
+        name:
+            f"train_shared_{_group}"
+        input:
+            unpack(partial(shared_inputs, exps=_exps)),
+        output:
+            **shared_outputs(_exps, None if _together else "{seed}"),
+        log:
+            f"results/logs/train/{_group}_L{{clip_len}}_" + ("seeds.log" if _together else "seed{seed}.log"),
+        benchmark:
+            f"results/benchmarks/train_shared_{_group}/L{{clip_len}}_" + ("seeds.tsv" if _together else "seed{seed}.tsv"),
+        wildcard_constraints:
+            clip_len=str(TRAIN["clip_len"]),
+            seed=r"\d+",
+        params:
+            rule=f"train_shared_{_group}",
+            py=PY,
+            exp=_exps[0],
+            overrides=partial(shared_overrides, exps=_exps),
+            seeds=lambda wildcards, t=_together: f"'seeds={yaml_list(TRAIN['seeds'])}'" if t else f"seed={wildcards.seed}",
+            # the app writes each configuration beside the first's run folder (its L<n> folder with seeds together)
+            hydra=lambda wildcards, output, t=_together: (f"hydra.run.dir={Path(output.metrics[0]).parents[1]}"
+                                                          " hydra.output_subdir=.hydra/seeds") if t
+                                                         else hydra_dir(output.metrics[0]),
+            profile=PROFILE,
+            device=config["device"],
+        threads: TRAIN.get("threads", 1)
+        resources:
+            gpu=GPU,
+        conda:
+            CONDA_ENV
+        shell:
+            ("OMP_NUM_THREADS={threads} " if "threads" in TRAIN else "")
+            + "PALPATION_PROFILE={params.profile} SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.train"
+            " experiment={params.exp} {params.seeds} clip_len={wildcards.clip_len} device={params.device}"
+            " {params.overrides} {params.hydra} > {log} 2>&1"
+
+    workflow.ruleorder(f"train_shared_{_group}", "train")
+    if _together:
+        workflow.ruleorder(f"train_shared_{_group}", "train_seeds")
+
+
 # Seeds together vs apart on A-to-A at the recipe's sizes (issue 17; `snakemake bench`, not part of `all`):
 # docs/results/bench_train.json is this file from the H100.
 rule bench_train:

@@ -5,6 +5,8 @@
     python -m palpation.apps.train experiment=A-to-B 'seeds=[0,1,2,3,4]' device=cuda   # one process
     python -m palpation.apps.train experiment=A-to-B 'seeds=[0,1]' 'also_test=[A-to-C:meat]' \
         hydra.run.dir=results/adhoc/train/A-to-B/L5        # one training, scored on Silicone and Meat
+    python -m palpation.apps.train experiment=A-to-A seed=0 'also_test=[A-to-B:silicone]' \
+        hydra.run.dir=results/adhoc/train/A-to-A/L5/seed0  # the same with one seed (no stacking)
     ... recipe=robust also_uncalibrated=results/adhoc/uncalibrated   # and its raw scores written there too
 Outputs land in Hydra's run dir (metrics.json, scores.npz, pr.npz, checkpoint.pt) and in MLflow; with
 `seeds`, seed s writes them to <run dir>/seed<s>/ (one MLflow run per seed all the same).
@@ -49,12 +51,17 @@ def _overrides() -> dict:
 
 def also_tested(cfg: DictConfig, job, out_dir) -> list[tuple[str, str, Path]]:
     """(config name, test set, run dir) of every `also_test` entry "<name>:<test set>": the run dir
-    <root>/<name>/L<n> beside this one, <root>/<config_name>/L<n>, so each keeps the workflow's run layout."""
+    <root>/<name>/L<n> beside this one, <root>/<config_name>/L<n> (with `seeds`), or <root>/<name>/L<n>/seed<s>
+    beside <root>/<config_name>/L<n>/seed<s> (one seed), so each keeps the workflow's run layout."""
     if not cfg.also_test:
         return []
-    out_dir = Path(out_dir)
-    if out_dir.name != f"L{job.clip_len}" or out_dir.parent.name != job.config_name:
-        raise ValueError(f"also_test needs the run dir <root>/{job.config_name}/L{job.clip_len} (got {out_dir}): "
+    out_dir, seed_dir = Path(out_dir), ""
+    if cfg.seeds is None:
+        out_dir, seed_dir = out_dir.parent, out_dir.name
+    if out_dir.name != f"L{job.clip_len}" or out_dir.parent.name != job.config_name \
+            or seed_dir not in ("", f"seed{job.seed}"):
+        where = f"<root>/{job.config_name}/L{job.clip_len}" + ("" if cfg.seeds is not None else f"/seed{job.seed}")
+        raise ValueError(f"also_test needs the run dir {where} (got {Path(out_dir) / seed_dir}): "
                          "set hydra.run.dir so the other configurations' folders sit beside it")
     pairs = [str(entry).partition(":") for entry in cfg.also_test]
     names = [name for name, _, _ in pairs]
@@ -62,7 +69,7 @@ def also_tested(cfg: DictConfig, job, out_dir) -> list[tuple[str, str, Path]]:
     if bad or job.config_name in names or len(set(names)) != len(names):
         raise ValueError(f"also_test={list(cfg.also_test)}: list distinct '<config name>:<test set>' entries, test "
                          f"sets among {sorted(cfg.data)}, names other than config_name ({job.config_name})")
-    return [(name, test_on, out_dir.parents[1] / name / out_dir.name) for name, _, test_on in pairs]
+    return [(name, test_on, out_dir.parents[1] / name / out_dir.name / seed_dir) for name, _, test_on in pairs]
 
 
 def run(cfg: DictConfig, out_dir: str | Path | None = None) -> dict | list[dict]:
@@ -93,18 +100,21 @@ def run(cfg: DictConfig, out_dir: str | Path | None = None) -> dict | list[dict]
             jobs += [replace(j, train=replace(j.train, calibration="none")) for j in jobs]
         return run_jobs_together(jobs, dirs, params=per_job, track=bool(cfg.tracking), tags=tags,
                                  progress=bool(cfg.progress))
-    if cfg.also_test or cfg.also_uncalibrated:
-        raise ValueError("also_test and also_uncalibrated use the models of `seeds` trained together: pass seeds=[...]")
+    if cfg.also_uncalibrated:
+        raise ValueError("also_uncalibrated uses the models of `seeds` trained together: pass seeds=[...]")
+    also = [(replace(job, config_name=name, test_on=test_on), d, {**params, "config_name": name, "test_on": test_on})
+            for name, test_on, d in also_tested(cfg, job, out_dir)]
     return run_job(job, out_dir, params=params, track=bool(cfg.tracking), tags=tags,
-                   progress=bool(cfg.progress))
+                   progress=bool(cfg.progress), also=also)
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="train")
 @app_main("train")
 def main(cfg: DictConfig) -> float:
     metrics = run(cfg)
-    if isinstance(metrics, list):  # seeds trained together: their mean
-        return sum(m["test"]["ap"] for m in metrics) / len(metrics)
+    if isinstance(metrics, list):  # seeds trained together or also_test: the mean over this configuration's seeds
+        own = [m["test"]["ap"] for m in metrics if m["config"] == cfg.config_name]
+        return sum(own) / len(own)
     return metrics["test"]["ap"]  # for sweepers that optimise
 
 

@@ -98,21 +98,50 @@ def _run_tags(job: TrainJob, tags: dict | None) -> dict:
 
 
 def run_job(job: TrainJob, out_dir: str | Path, params: dict | None = None, track: bool = True,
-            tags: dict | None = None, progress: bool = False) -> dict:
+            tags: dict | None = None, progress: bool = False, also: list[tuple] = ()) -> dict | list[dict]:
     """Train, score and write outputs; returns the metrics dict also saved as metrics.json.
 
-    `progress`: tqdm bars over the training batches and the test scoring."""
+    `progress`: tqdm bars over the training batches and the test scoring. `also`: (job, out_dir, params) of
+    configurations that train alike (same seed; only the test set differs, e.g. A-to-B and A-to-C beside A-to-A):
+    the one model is scored on each test set, each with its own outputs and MLflow run, byte for byte what its
+    own training would give (training reads no test set); then one metrics dict per configuration, `job` first,
+    each with `trained_together` (its configs, the training wall seconds) and `train_seconds` its share."""
     if job.train.calibration == "cross_real":
         raise ValueError(f"{job.config_name}: calibration=cross_real fits on the same models' scores on another real "
                          "set; train with seeds=[...] and also_test=[<config>:<set>] (e.g. A-to-B with "
                          "also_test=[A-to-C:meat]), or use calibration=platt")
+    others = list(also)
+    if any(training_key(o) != training_key(job) or o.seed != job.seed or o.train != job.train for o, *_ in others):
+        raise ValueError(f"also: configurations scored by {job.config_name}'s model must train alike (same seed, "
+                         "training set, model and recipe); train the others apart")
     d = load_job_data(job)
+    steps = []
+
+    def log_and_keep(metrics, step):  # the other configurations' runs get the same history afterwards
+        steps.append((dict(metrics), step))
+        tracking.log_metrics(metrics, step)
+
     ctx = (tracking.start_run("train", params or asdict(job), f"{job.config_name}/L{job.clip_len}",
                               _run_tags(job, tags), seed=job.seed) if track else nullcontext())
     with ctx:
         result = fit(d.train, d.val, d.rest, d.topo, job.model, job.train, job.seed,
-                     tracking.log_metrics if track else None, progress=progress)
-        return finish_job(job, result, d, out_dir, track, progress)
+                     (log_and_keep if others else tracking.log_metrics) if track else None, progress=progress)
+        if not others:
+            return finish_job(job, result, d, out_dir, track, progress)
+        shared = {"trained_together": {"seeds": [job.seed], "train_seconds": result.train_seconds,
+                                       "configs": [job.config_name] + [o.config_name for o, *_ in others]}}
+        share = replace(result, train_seconds=result.train_seconds / (1 + len(others)))
+        out = [finish_job(job, share, d, out_dir, track, progress, shared)]
+    for other, other_dir, other_params in others:
+        ctx = (tracking.start_run("train", other_params or asdict(other), f"{other.config_name}/L{other.clip_len}",
+                                  {**_run_tags(other, tags), "trained_with": job.config_name}, seed=other.seed)
+               if track else nullcontext())
+        with ctx:
+            if track:
+                tracking.log_metric_history(steps)
+            test = d.test if (other.test_on, other.data) == (job.test_on, job.data) else load_test_set(other, d.rest)
+            out.append(finish_job(other, share, replace(d, test=test), other_dir, track, progress, shared))
+    return out
 
 
 def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: list[dict] | None = None,
