@@ -75,6 +75,7 @@ class TrainConfig:
     # post-hoc: none | temperature | platt (on the validation split) | cross_real (Platt on the same models' scores on
     # the other real test set scored with them, also_test; never the run's own test set)
     calibration: str = "none"
+    restarts: int = 1  # starts per seed, the best on val kept (palpation.model.restarts); 1 = the seed alone
     threshold: float = 0.5
     device: str = "cpu"
 
@@ -89,8 +90,9 @@ class TrainConfig:
                              f"{self.jitter_px}, {self.marker_dropout}, {self.displacement_scale}")
         if self.patience is not None and self.patience < 1:
             raise ValueError(f"patience must be >= 1 epoch or null (off), got {self.patience}")
-        if self.batch_size < 1 or self.epochs < 1:
-            raise ValueError(f"batch_size and epochs must be >= 1, got {self.batch_size}, {self.epochs}")
+        if self.batch_size < 1 or self.epochs < 1 or self.restarts < 1:
+            raise ValueError(f"batch_size, epochs and restarts must be >= 1, got {self.batch_size}, {self.epochs}, "
+                             f"{self.restarts}")
 
 
 # ---- schema of conf/train.yaml (Hydra needs runtime types: Optional/Dict, not `int | None`) ----
@@ -107,6 +109,7 @@ class SizesSchema:
 
 @dataclass
 class RunSizesSchema(SizesSchema):
+    restarts: int = MISSING
     threshold: float = MISSING
 
 

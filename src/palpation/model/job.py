@@ -33,8 +33,9 @@ from palpation.model.checkpoint import checkpoint_bytes, save_checkpoint
 from palpation.model.config import ModelConfig, TrainConfig
 from palpation.model.evaluate import predict
 from palpation.model.stgnn import count_parameters
-from palpation.model.stacked import fit_seeds, predict_seeds
-from palpation.model.train import FitResult, fit
+from palpation.model.restarts import fit_restarts, fit_seeds_restarts
+from palpation.model.stacked import predict_seeds
+from palpation.model.train import FitResult
 
 log = logging.getLogger(__name__)
 OUTPUTS = ("metrics.json", "scores.npz", "pr.npz", "checkpoint.pt")
@@ -124,12 +125,14 @@ def run_job(job: TrainJob, out_dir: str | Path, params: dict | None = None, trac
     ctx = (tracking.start_run("train", params or asdict(job), f"{job.config_name}/L{job.clip_len}",
                               _run_tags(job, tags), seed=job.seed) if track else nullcontext())
     with ctx:
-        result = fit(d.train, d.val, d.rest, d.topo, job.model, job.train, job.seed,
-                     (log_and_keep if others else tracking.log_metrics) if track else None, progress=progress)
+        result, restarts = fit_restarts(d.train, d.val, d.rest, d.topo, job.model, job.train, job.seed,
+                                        (log_and_keep if others else tracking.log_metrics) if track else None,
+                                        progress=progress)
         if not others:
-            return finish_job(job, result, d, out_dir, track, progress)
-        shared = {"trained_together": {"seeds": [job.seed], "train_seconds": result.train_seconds,
-                                       "configs": [job.config_name] + [o.config_name for o, *_ in others]}}
+            return finish_job(job, result, d, out_dir, track, progress, restarts)
+        shared = {**restarts, "trained_together": {
+            "seeds": [job.seed], "train_seconds": result.train_seconds,
+            "configs": [job.config_name] + [o.config_name for o, *_ in others]}}
         share = replace(result, train_seconds=result.train_seconds / (1 + len(others)))
         out = [finish_job(job, share, d, out_dir, track, progress, shared)]
     for other, other_dir, other_params in others:
@@ -170,7 +173,8 @@ def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: 
                          f"{outputs}")
     partner = {j.config_name: cross_real_partner(j, tests) for j in jobs if j.train.calibration == "cross_real"}
     d = load_job_data(first)
-    results = fit_seeds(d.train, d.val, d.rest, d.topo, first.model, first.train, seeds, progress=progress)
+    results, restarts = fit_seeds_restarts(d.train, d.val, d.rest, d.topo, first.model, first.train, seeds,
+                                           progress=progress)
     joint = results[0].train_seconds
     by_seed = dict(zip(seeds, results))
     together = {"seeds": seeds, "train_seconds": joint}
@@ -200,7 +204,8 @@ def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: 
             if job.config_name in partner:  # the same seed's models' raw scores on the other real set
                 fit_on = (*scored[(partner[job.config_name], job.seed)][:2], partner[job.config_name])
             out.append(finish_job(job, result, replace(d, test=test_sets[job.config_name]), out_dir, track,
-                                  progress, {"trained_together": together}, scored[(job.config_name, job.seed)],
+                                  progress, {**restarts[job.seed], "trained_together": together},
+                                  scored[(job.config_name, job.seed)],
                                   fit_on))
     return out
 
