@@ -222,6 +222,18 @@ def test_sim_set_twin_follows_the_choice(tmp_path):
     assert "at key 'dataset.twin'" in line and "workflow/schemas/config.schema.yaml" in line
 
 
+def test_every_paper_command_parses_in_bash(tmp_path):
+    """Each shell command of the paper profile's whole DAG is valid bash (a quote inside a logged parameter once broke
+    simulate_dataset_calibrated on the device, rc 2 and an empty log, where no CPU profile ran it)."""
+    listing = dry_run(tmp_path, "-p", "--workflow-profile", str(REPO_ROOT / "workflow/profiles/paper"))
+    commands = [ln.split("Shell command: ", 1)[1] for ln in listing.splitlines() if ln.startswith("Shell command: ")]
+    assert len(commands) > 20 and any("simulate_dataset_calibrated" in c for c in commands)
+    for cmd in commands:
+        if cmd != "None":
+            check = subprocess.run(["bash", "-n", "-c", cmd], capture_output=True, text=True)
+            assert check.returncode == 0, f"{cmd[:200]}: {check.stderr}"
+
+
 def test_paper_recipe_ablation_plan(tmp_path):
     """The paper profile's recipe ablation (docs/recipe.md, its device-time plan): with train.seeds_together one job
     per (recipe, switch_off, training set), A-to-B and A-to-C trained once; switch rows for those two only; the

@@ -33,7 +33,7 @@ rule simulate_dataset:
     conda:
         CONDA_ENV
     shell:
-        "echo 'Sim set twin: {params.source}, fit {input.fit}' > {log};"
+        "echo Sim set twin: {params.source:q}, fit {input.fit:q} > {log};"  # :q, one shell word whatever it holds
         " SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.simulate set=randomised"
         " n_pairs={params.n_pairs} seed={params.seed}"
         " dataset.recentre_k_n={params.recentre}"
