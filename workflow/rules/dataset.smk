@@ -24,6 +24,9 @@ rule simulate_dataset:
         recentre=str(DATASET["recentre_k_n"]).lower(),
         fit_args=lambda wildcards, input: fit_overrides(input.fit),
         source=f"dataset.twin={DATASET_TWIN}",  # logged: which twin, chosen or pinned
+    # the main Sim set is on the paper profile's critical path (loop -> Sim set -> training): it takes the next GPU
+    # slot before the ablations' jobs (a device run lost 20 s to a twin-ablation training taking it first)
+    priority: 10
     resources:
         gpu=GPU,
     log:
@@ -50,6 +53,7 @@ use rule simulate_dataset as simulate_dataset_calibrated with:
         fit=rules.calibrate.output.fit,
     output:
         manifest="results/sim/dataset_calibrated/manifest.json",
+    priority: 0
     params:
         rule="simulate_dataset_calibrated",
         source="the calibration's twin (twin ablation, judge candidate calibrated)",

@@ -97,6 +97,30 @@ if TRAIN["seeds_together"]:
 
     ruleorder: train_seeds > train
 
+    # The clip-length ablation's other lengths (Table 3): its seeds together too, one job per length.
+    _ABL = TRAIN["ablation"]
+    _ABL_LENS = [str(n) for n in _ABL["clip_lens"] if n != TRAIN["clip_len"]]
+    if _ABL_LENS and _ABL["seeds"]:
+
+        use rule train_seeds as train_ablation_seeds with:
+            output:
+                metrics=expand(f"{TRAIN_RUN}/metrics.json", seed=_ABL["seeds"], allow_missing=True),
+                scores=expand(f"{TRAIN_RUN}/scores.npz", seed=_ABL["seeds"], allow_missing=True),
+                pr=expand(f"{TRAIN_RUN}/pr.npz", seed=_ABL["seeds"], allow_missing=True),
+                checkpoint=expand(f"{TRAIN_RUN}/checkpoint.pt", seed=_ABL["seeds"], allow_missing=True),
+            log:
+                "results/logs/train/{exp}_L{clip_len}_ablation_seeds.log",
+            benchmark:
+                f"results/benchmarks/train_ablation_seeds/{{exp}}_L{{clip_len}}_seeds.tsv",
+            wildcard_constraints:
+                exp=_ABL["experiment"],
+                clip_len="|".join(_ABL_LENS),
+            params:
+                rule="train_ablation_seeds",
+                seeds=yaml_list(_ABL["seeds"]),
+
+        ruleorder: train_ablation_seeds > train
+
 
 # Configurations that train alike (train_groups: A-to-A, A-to-B and A-to-C all train the large model on Sim) train
 # once and score every test set (app key also_test), at the profile's clip length: one job per seed, or per group
@@ -114,6 +138,7 @@ for _group, _exps in train_groups(TRAIN["experiments"]).items():
             unpack(partial(shared_inputs, exps=_exps)),
         output:
             **shared_outputs(_exps, None if _together else "{seed}"),
+        priority: 5  # the main sweep's models before the ablations' (the paper profile's critical path)
         log:
             f"results/logs/train/{_group}_L{{clip_len}}_" + ("seeds.log" if _together else "seed{seed}.log"),
         benchmark:
