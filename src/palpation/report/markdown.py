@@ -8,6 +8,10 @@ from palpation.metrics.aggregate import summarise_seeds
 
 
 def markdown(header: list[str], rows: list[list]) -> str:
+    """A pipe table of preformatted cells. Not `DataFrame.to_markdown` (tabulate 0.10, checked 2026-11-27): it parses
+    "0.7250" back to 0.725, dropping the fixed digits `num` gives, and pads and aligns every column, so every
+    committed table and results page would change byte for byte; `disable_numparse=True` keeps the digits, not the
+    layout."""
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
     return "\n".join(lines) + "\n"
