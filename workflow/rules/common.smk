@@ -149,7 +149,7 @@ def calibration_outputs(out):
     }
 
 
-# the training helpers (train_inputs, train_overrides, train_groups, shared_*, recipe_*): common_train.smk
+# the training helpers (train_inputs, train_overrides, train_groups, group_*, run_files, recipe_*): common_train.smk
 include: "common_train.smk"
 
 
@@ -266,21 +266,6 @@ def judge_sim(wildcards):
     if wildcards.twin == "photo_loop":
         return PHOTO_SIM
     return f"{JUDGE_DIR}/sim/{wildcards.twin}/manifest.json"
-
-
-def judge_first(wildcards):
-    """The candidate's first configuration (A-to-B): the one a seeds-together job trains."""
-    return SimpleNamespace(exp=JUDGE_EXPERIMENTS[0], twin=wildcards.twin)
-
-
-def judge_seeds_inputs(wildcards):
-    """Every judged configuration's datasets and conf/ files: one job trains A-to-B and scores A-to-C (Meat)."""
-    out = {}
-    for exp in JUDGE_EXPERIMENTS:
-        one = train_inputs(SimpleNamespace(exp=exp, twin=wildcards.twin), judge_sim(wildcards), JUDGE_RECIPE)
-        conf = sorted(set(out.get("conf", [])) | set(one.pop("conf")))
-        out.update(one, conf=conf)
-    return out
 
 
 # Every job knows its profile (MLflow tags runs with it) and writes no MLflow artefacts into ./mlruns.

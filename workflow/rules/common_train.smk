@@ -32,11 +32,7 @@ def train_overrides(wildcards, sim=TRAIN_DATA["sim"], recipe=TRAIN["recipe"]):
 def recipe_inputs(wildcards, exps=None):
     """The datasets and conf/ files of one recipe-ablation run (its recipe, not the profile's); `exps`: the
     configurations one job trains together (recipe_groups), else the wildcard's one."""
-    exps = exps or [wildcards.exp]
-    data = {k: v for exp in exps for k, v in train_data(SimpleNamespace(exp=exp)).items()}
-    confs = [f for exp in exps for f in conf_files("train", {"experiment": exp, "model": EXPERIMENTS[exp].model,
-                                                           "recipe": wildcards.recipe})]
-    return {**data, "conf": sorted(set(confs))}
+    return group_inputs(exps or [wildcards.exp], recipe=wildcards.recipe)
 
 
 def recipe_overrides(wildcards, exps=None):
@@ -49,7 +45,7 @@ def recipe_overrides(wildcards, exps=None):
     sizes = (RECIPE_ABL["sizes"].get(wildcards.recipe) or {}).get(EXPERIMENTS[exps[0]].model) or {}
     knobs = size_knobs(sizes)
     off = [] if wildcards.switch == "none" else switch_off(wildcards.switch)
-    also = [f"'also_test=[{','.join(f'{e}:{EXPERIMENTS[e].test_on}' for e in exps[1:])}]'"] if exps[1:] else []
+    also = [also_test_arg(exps[1:])] if exps[1:] else []
     return " ".join(data + knobs + [f"recipe={wildcards.recipe}"] + off + also)
 
 
@@ -69,10 +65,8 @@ def recipe_groups():
 
 def recipe_seed_outputs(exps, recipe, *switches):
     """Outputs of a seeds-together ablation job: every seed of every configuration of `exps`, per switch_off folder."""
-    return {key: [str(run_dir(recipe_root(RECIPE_DIR, recipe, switch), exp, "{clip_len}", seed) / name)
-                  for switch in switches for exp in exps for seed in RECIPE_ABL["seeds"]]
-            for key, name in (("metrics", "metrics.json"), ("scores", "scores.npz"), ("pr", "pr.npz"),
-                              ("checkpoint", "checkpoint.pt"))}
+    return run_files(run_dir(recipe_root(RECIPE_DIR, recipe, switch), exp, "{clip_len}", seed)
+                     for switch in switches for exp in exps for seed in RECIPE_ABL["seeds"])
 
 
 def recipe_shares_calibration(exps):
@@ -98,23 +92,36 @@ def recipe_runs(name):
                             clip_len=TRAIN["clip_len"], seed=RECIPE_ABL["seeds"])]
 
 
-def shared_outputs(exps, seed):
-    seeds = TRAIN["seeds"] if seed is None else [seed]
-    return {key: [str(run_dir(TRAIN_DIR, e, "{clip_len}", s) / name) for e in exps for s in seeds]
+def run_files(dirs):
+    """A training job's outputs, {"metrics": [<dir>/metrics.json, ...], "scores": ..., ...}, over run folders `dirs`."""
+    dirs = list(dirs)
+    return {key: [str(Path(d) / name) for d in dirs]
             for key, name in (("metrics", "metrics.json"), ("scores", "scores.npz"), ("pr", "pr.npz"),
                               ("checkpoint", "checkpoint.pt"))}
 
 
-def shared_inputs(wildcards, exps):
-    ins = [train_inputs(SimpleNamespace(exp=e)) for e in exps]
+def shared_outputs(exps, seed):
+    """The outputs of train_shared_<group> (train.smk): one seed's run folders (or every seed's, seed None) of each
+    configuration of `exps`."""
+    seeds = TRAIN["seeds"] if seed is None else [seed]
+    return run_files(run_dir(TRAIN_DIR, e, "{clip_len}", s) for e in exps for s in seeds)
+
+
+def group_inputs(exps, sim=TRAIN_DATA["sim"], recipe=TRAIN["recipe"]):
+    """The datasets and conf/ files of configurations one job trains together (train_groups): their union."""
+    ins = [train_inputs(SimpleNamespace(exp=e), sim, recipe) for e in exps]
     return {**{k: v for one in ins for k, v in one.items() if k != "conf"},
             "conf": sorted({f for one in ins for f in one["conf"]})}
 
 
-def shared_overrides(wildcards, exps):
+def also_test_arg(exps):
+    """The train app's `also_test` naming `exps` and their test sets, as one shell-quoted override."""
+    return "'also_test=[" + ",".join(f"{e}:{EXPERIMENTS[e].test_on}" for e in exps) + "]'"
+
+
+def group_overrides(exps, sim=TRAIN_DATA["sim"], recipe=TRAIN["recipe"]):
     """The first configuration's overrides, the others' test sets and `also_test` naming them."""
-    first = train_overrides(SimpleNamespace(exp=exps[0]))
-    others = {k: v for k, v in shared_inputs(wildcards, exps[1:]).items()
-              if k != "conf" and f"data.{k}=" not in first}
-    also = ",".join(f"{e}:{EXPERIMENTS[e].test_on}" for e in exps[1:])
-    return " ".join([first] + [f"data.{k}={v}" for k, v in others.items()] + [f"'also_test=[{also}]'"])
+    own = train_data(SimpleNamespace(exp=exps[0]), sim)
+    others = {k: v for k, v in group_inputs(exps[1:], sim, recipe).items() if k != "conf" and k not in own}
+    return " ".join([train_overrides(SimpleNamespace(exp=exps[0]), sim, recipe)]
+                    + [f"data.{k}={v}" for k, v in others.items()] + [also_test_arg(exps[1:])])

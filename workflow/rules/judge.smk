@@ -151,12 +151,10 @@ if TRAIN["seeds_together"] and JUDGE["seeds"]:
 
     rule judge_train_seeds:
         input:
-            unpack(judge_seeds_inputs),
+            unpack(lambda wildcards: group_inputs(JUDGE_EXPERIMENTS, judge_sim(wildcards), JUDGE_RECIPE)),
         output:
-            **{key: [str(run_dir(f"{JUDGE_DIR}/train/{{twin}}", e, "{clip_len}", s) / name)
-                     for e in JUDGE_EXPERIMENTS for s in JUDGE["seeds"]]
-               for key, name in (("metrics", "metrics.json"), ("scores", "scores.npz"), ("pr", "pr.npz"),
-                                 ("checkpoint", "checkpoint.pt"))},
+            **run_files(run_dir(f"{JUDGE_DIR}/train/{{twin}}", e, "{clip_len}", s)
+                        for e in JUDGE_EXPERIMENTS for s in JUDGE["seeds"]),
         wildcard_constraints:
             twin="|".join(JUDGE_TRAINED),
             clip_len=str(TRAIN["clip_len"]),
@@ -168,11 +166,7 @@ if TRAIN["seeds_together"] and JUDGE["seeds"]:
             rule="judge_train_seeds",
             py=PY,
             exp=JUDGE_EXPERIMENTS[0],
-            overrides=lambda wildcards: " ".join(
-                [train_overrides(judge_first(wildcards), judge_sim(wildcards), JUDGE_RECIPE)]
-                + [f"data.{k}={v}" for k, v in judge_seeds_inputs(wildcards).items()
-                   if k not in ("conf", "sim", EXPERIMENTS[JUDGE_EXPERIMENTS[0]].test_on)]  # the other test sets
-                + ["'also_test=[" + ",".join(f"{e}:{EXPERIMENTS[e].test_on}" for e in JUDGE_EXPERIMENTS[1:]) + "]'"]),
+            overrides=lambda wildcards: group_overrides(JUDGE_EXPERIMENTS, judge_sim(wildcards), JUDGE_RECIPE),
             seeds=yaml_list(JUDGE["seeds"]),
             # the app writes seed s of A-to-B to <run dir>/seed<s>/ (run dir = its L<clip_len> folder), A-to-C beside it
             hydra=lambda wildcards, output: (f"hydra.run.dir={Path(output.metrics[0]).parents[1]}"

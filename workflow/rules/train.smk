@@ -125,7 +125,8 @@ if TRAIN["seeds_together"]:
 # Configurations that train alike (train_groups: A-to-A, A-to-B and A-to-C all train the large model on Sim) train
 # once and score every test set (app key also_test), at the profile's clip length: one job per seed, or per group
 # with train.seeds_together. Each keeps its run folder and MLflow run; one seed's outputs are byte for byte rule
-# train's (tests/apps/test_train_app.py). The clip-length ablation's other lengths still train through rule train.
+# train's (tests/apps/test_train_app.py). The clip-length ablation's other lengths train through rule train (or,
+# with seeds together, train_ablation_seeds above).
 for _group, _exps in train_groups(TRAIN["experiments"]).items():
     if len(_exps) < 2:
         continue
@@ -135,7 +136,7 @@ for _group, _exps in train_groups(TRAIN["experiments"]).items():
         name:
             f"train_shared_{_group}"
         input:
-            unpack(partial(shared_inputs, exps=_exps)),
+            unpack(lambda wildcards, e=_exps: group_inputs(e)),
         output:
             **shared_outputs(_exps, None if _together else "{seed}"),
         priority: 5  # the main sweep's models before the ablations' (the paper profile's critical path)
@@ -150,7 +151,7 @@ for _group, _exps in train_groups(TRAIN["experiments"]).items():
             rule=f"train_shared_{_group}",
             py=PY,
             exp=_exps[0],
-            overrides=partial(shared_overrides, exps=_exps),
+            overrides=lambda wildcards, e=_exps: group_overrides(e),
             seeds=lambda wildcards, t=_together: f"'seeds={yaml_list(TRAIN['seeds'])}'" if t else f"seed={wildcards.seed}",
             # the app writes each configuration beside the first's run folder (its L<n> folder with seeds together)
             hydra=lambda wildcards, output, t=_together: (f"hydra.run.dir={Path(output.metrics[0]).parents[1]}"
