@@ -6,8 +6,20 @@ from pathlib import Path
 
 import pytest
 
+from palpation.paths import REPO_ROOT
 from palpation.report import reproduction
-from palpation.report.results_page import timing
+from palpation.report.results_page import build_page
+
+PAGE_CONF = REPO_ROOT / "conf" / "results_page"
+
+
+def timing(root: Path, rec: dict | None, built_commit: str) -> str:
+    """The rendered page's Timing section, with `rec` as the run's only reproduction record."""
+    if rec is not None:
+        (root / "bench").mkdir(parents=True, exist_ok=True)
+        (root / "bench" / "reproduction.json").write_text(json.dumps([rec]))
+    text, _ = build_page(root, PAGE_CONF / "explanations.yaml", PAGE_CONF / "folders.yaml", built_commit=built_commit)
+    return text.split("## Timing")[1].split("\n## ")[0]
 
 HEADER = "s\th:m:s\tmax_rss\tmax_vms\tmax_uss\tmax_pss\tio_in\tio_out\tmean_load\tcpu_time\n"
 
@@ -51,7 +63,10 @@ def test_page_times_a_fresh_run_from_its_benchmark_files(tmp_path):
 def test_page_without_benchmarks_uses_the_record_or_says_none(tmp_path):
     rec = {"profile": "quick", "device": "cpu", "wall_s": 700.0, "per_rule": {"train": 300.0}, "commit": "aaa"}
     assert "wall time 700.0 s" in timing(tmp_path, rec, "bbb") and "| train | 300.0 |" in timing(tmp_path, rec, "b")
-    assert "No timing record for this profile" in timing(tmp_path, None, "bbb")
+    assert "exceed the wall time); here the record's commit differs" in timing(tmp_path, rec, "bbb")
+    assert "exceed the wall time).\n\n| rule | s |" in timing(tmp_path, rec, "aaa")
+    (tmp_path / "empty").mkdir()
+    assert "No timing record for this profile" in timing(tmp_path / "empty", None, "bbb")
 
 
 def test_record_run_sums_only_this_runs_jobs(tmp_path, monkeypatch):
