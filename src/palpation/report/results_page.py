@@ -3,8 +3,9 @@ why they differ.
 
 `build_page(root)` reads a run's outputs under a results root (read only) and returns one Markdown page;
 `write_page` writes it atomically. The page's order, headings and prose are the Jinja2 template
-`templates/results_page.md.j2`; this module gathers what fills it (numbers, tables, links, generated bullets). Rule `results_page` makes `results/README.md`; `docs/results.md` is a
-committed copy from a paper-profile run. A section whose inputs the run did not produce says so. Known
+`templates/results_page.md.j2`; this module gathers what fills it (numbers, tables, links, generated
+bullets). Rule `results_page` makes `results/README.md`; `docs/results.md` is a committed copy from a
+paper-profile run. A section whose inputs the run did not produce says so. Known
 causes of differences live in a data file (conf/results_page/explanations.yaml), shown only when their
 table is on the page and, with `when:`, only when the numbers show the difference they explain.
 """
