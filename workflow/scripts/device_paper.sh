@@ -12,8 +12,8 @@ timeout -s INT "${SNAKE_TIMEOUT:-0}" python3 -m snakemake --workflow-profile wor
 rc=$?
 echo "snakemake rc=$rc after $(( $(date +%s) - start )) s"
 grep -E "steps \(|Error|Exiting" "$out/snakemake.log" | tail -5
-tar czf "$out/paper_results.tgz" --exclude='*.npz' --exclude='*.pt' --exclude='*.mp4' \
+tar czf "$out/paper_results.tgz" --exclude='*.npz' --exclude='*.npy' --exclude='*.pt' --exclude='*.mp4' --exclude=results/judge/sim \
   results/train/report results/maps results/calibration results/loop results/README.md results/bench results/data/summary.csv \
-  results/data/summary.md results/logs $(ls -d results/train/*/L*/seed*/metrics.json 2>/dev/null) \
+  results/data/summary.md results/logs results/judge results/loop_slides $(ls -d results/train/*/L*/seed*/metrics.json 2>/dev/null) \
   2>/dev/null
 exit $rc
