@@ -25,7 +25,6 @@ rule results_page:
         conf=conf_files("results_page"),
         explanations="conf/results_page/explanations.yaml",
         folders="conf/results_page/folders.yaml",
-        template="src/palpation/report/templates/results_page.md.j2",  # the page's skeleton: an edit rebuilds it
     output:
         page=report("results/README.md", caption="../report/results_page.rst", category="Results page"),
     log:
