@@ -139,3 +139,20 @@ def test_kept_validation_reads_the_kept_epochs_val_ap():
     assert v != v and e == 0
     v, _ = kept_validation({"best_epoch": 3})
     assert v != v
+
+
+def test_reference_rows_apart_from_the_seed_sweep_are_flagged():
+    """The ablation's reference rows and the seed sweep train the same recipe: AP apart beyond seed noise means
+    another Sim set, and the page says so; within noise it says nothing."""
+    import pandas as pd
+
+    from palpation.report.page_recipe import sweep_mismatch
+
+    df = pd.DataFrame([dict(config="A-to-B", recipe="reference", switch_off="none", seeds=5, ap_mean=0.280,
+                            ap_std=0.006), dict(config="A-to-B", recipe="robust", switch_off="none", seeds=5,
+                                                 ap_mean=0.200, ap_std=0.006)])
+    sweep = pd.DataFrame({"config": ["A-to-B"] * 5, "ap": [0.315, 0.320, 0.323, 0.326, 0.331]})
+    (line,) = sweep_mismatch(df, sweep)
+    assert line.startswith("A-to-B (Sim→Silicone), reference: AP 0.2800 here vs 0.3230 in the seed sweep")
+    assert sweep_mismatch(df, sweep.assign(ap=sweep["ap"] - 0.043)) == []  # the same Sim set: within noise
+    assert sweep_mismatch(df, None) == []

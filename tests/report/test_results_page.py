@@ -303,3 +303,17 @@ def test_crossfit_section_says_by_how_much_each_aim_is_missed(tmp_path):
     assert "A-to-C (Sim→Meat): d̄ at calibrated 0.5 2.50 mm (aim <= 3 mm): met." in sec
     diff = text.split("### Training recipe: calibration cross-fitted")[1].split("\n### ")[0]
     assert "5 of 11 aim checks met, 6 missed" in diff and "want different Platt slopes" in diff
+
+
+def test_data_section_names_the_twin_that_made_the_sim_set(tmp_path):
+    root = fake_results(tmp_path / "results")
+    assert "sim: simulated by" not in page(root)  # neither record: the page says nothing it cannot read
+    log = root / "logs" / "sim" / "simulate_dataset.log"
+    log.parent.mkdir(parents=True)
+    log.write_text("Sim set twin: dataset.twin=photo_loop, fit results/loop/twin_fit/fitted.yaml\nWarp ...\n")
+    assert ("sim: simulated by dataset.twin=photo_loop, fit results/loop/twin_fit/fitted.yaml "
+            "(`logs/sim/simulate_dataset.log`).") in page(root)
+    choice = root / "judge" / "choice" / "choice.json"  # rule twin_choice's record wins over the log
+    choice.parent.mkdir(parents=True)
+    choice.write_text(json.dumps({"sim_set_twin": "calibrated", "how": "the evidence's choice"}))
+    assert "sim: simulated by the `calibrated` twin (the evidence's choice; `judge/choice/choice.json`)." in page(root)

@@ -44,12 +44,36 @@ def partial_text(report: dict | None) -> str:
             + (f" Why: {why}" if why else "") + "\n\n" + items + "\n\n")
 
 
-def recipe_ablation_section(df: pd.DataFrame, report: dict | None = None) -> Section:
-    """The ablation table; `report` (recipe_report.json) names the rows a partial table leaves out."""
+def sweep_mismatch(df: pd.DataFrame, sweep: pd.DataFrame | None, k: float = 2.0) -> list[str]:
+    """The ablation's reference rows against the seed sweep's runs of the same recipe and configuration: AP apart by
+    more than k combined seed stds means the two tables were not trained on the same Sim set (or sizes), so this
+    table's rows compare with each other, not with the tables above it."""
+    if sweep is None or "ap" not in sweep.columns:
+        return []
+    out = []
+    for _, r in df[(df["recipe"] == "reference") & (df["switch_off"] == "none")].iterrows():
+        theirs = sweep.loc[sweep["config"] == r["config"], "ap"]
+        if len(theirs) < 2 or int(r["seeds"]) < 2:
+            continue
+        sigma = math.hypot(float(r["ap_std"]), float(theirs.std()))
+        z = abs(float(r["ap_mean"]) - theirs.mean()) / sigma if sigma > 0 else math.inf
+        if z > k:
+            out.append(f"{title(r['config'])}, reference: AP {num(r['ap_mean'])} here vs {num(theirs.mean())} in the "
+                       f"seed sweep ({z:.1f}σ apart), the same recipe: this table's runs were not trained on the seed "
+                       "sweep's Sim set (or at its sizes), so compare its rows with each other, not with the tables "
+                       "above.")
+    return out
+
+
+def recipe_ablation_section(df: pd.DataFrame, report: dict | None = None, sweep: pd.DataFrame | None = None,
+                            k: float = 2.0) -> Section:
+    """The ablation table; `report` (recipe_report.json) names the rows a partial table leaves out; `sweep` (the
+    seed sweep) checks that the reference rows come from the same Sim set as the main tables."""
     rows = [[title(r["config"]), r["recipe"], r["switch_off"], int(r["seeds"]),
              f"{num(r['auroc_mean'])} ± {num(r['auroc_std'])}", f"{num(r['ap_mean'])} ± {num(r['ap_std'])}",
              f"{100 * r['pos_share_05']:.1f} %", num(r["ece"]), num(r["d_bar_mm"], 2)] for _, r in df.iterrows()]
     bullets, gaps = aim_lines(aim_checks(df), lambda config: f"{title(config)}, robust")
+    bullets += sweep_mismatch(df, sweep, k)
     body = ("Mean ± sample std over seeds of the recipe runs (`results/recipe/`). `switch_off` names the robust "
             "recipe's switch turned back to the reference value (`none`: the full recipe). Positive share at 0.5 "
             "and ECE are computed on the written test scores (calibrated where the recipe calibrates, on the "

@@ -249,9 +249,9 @@ def twin_ablation_section(df: pd.DataFrame, k: float = 2.0) -> Section:
             gaps += [Gap(exp, m, c.diff, c.within) for m, c in cmp.items()]
             bullets.append(f"{title(exp)}: Sim from the loop's twin vs the calibrated twin: "
                            + ", ".join(f"{NAMES[m]} {signed(c.diff)} ({c.verdict()})" for m, c in cmp.items()) + ".")
-    body = ("Models trained on a Sim set made by the residual loop's final twin (`loop`, the workflow's default) "
-            "or by the calibrated twin alone (`calibrated`); mean ± sample std over seeds. The paper's row is its "
-            "seed sweep (SPEC §15.1).\n\n"
+    body = ("Models trained on a Sim set made by the residual loop's final twin (`loop`, fitted on the flat-tip "
+            "photos) or by the calibrated twin alone (`calibrated`); mean ± sample std over seeds. The paper's row is "
+            "its seed sweep (SPEC §15.1).\n\n"
             + markdown(["Config", "Sim made by", "seeds", "AUROC", "AP", "FG IoU", "BG IoU"], rows))
     return Section("twin_ablation", TITLES["twin_ablation"], body, bullets, gaps,
                    set(df["experiment"]))

@@ -27,7 +27,9 @@ def _rate(ours: float, paper: float | None) -> tuple[str, str, str]:
     return num(ours), num(paper), f"{signed(ours - paper)}, {(ours - paper) / paper:+.1%}"
 
 
-def data_sets(df: pd.DataFrame, sweep: pd.DataFrame | None = None, t4: pd.DataFrame | None = None) -> Section:
+def data_sets(df: pd.DataFrame, sweep: pd.DataFrame | None = None, t4: pd.DataFrame | None = None,
+              sim_twin: str | None = None) -> Section:
+    """The data sets beside the paper's; `sim_twin` says which twin simulated the main Sim set, where recorded."""
     rows, gaps, bullets = [], [], []
     for _, r in df.iterrows():
         name, paper = r["dataset"], DATASETS.get(r["dataset"], {})
@@ -49,6 +51,8 @@ def data_sets(df: pd.DataFrame, sweep: pd.DataFrame | None = None, t4: pd.DataFr
         gaps.append(Gap("sim", "positive_rate", chance - DATASETS["sim"]["positive_rate"], None))
         bullets.append(f"sim: A-to-A test-split positive rate {rate[0]} vs {rate[1]} ({rate[2]}).")
         names.add("sim")
+    if sim_twin:
+        bullets.append(f"sim: simulated by {sim_twin}.")
     body = ("Central-frame positive rate at L = 5, as the reference counts it (SPEC §7, §13.4–13.5); frames are "
             "clip-centre frames (viewer states).\n\n"
             + markdown(["set", "trials", "paper", "frames", "paper", "positive rate", "paper", "ours − paper"], rows))

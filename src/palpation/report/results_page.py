@@ -55,6 +55,7 @@ FIGURES = (  # (caption, path under the results root; a glob lists every match)
 PAGE = jinja2.Environment(loader=jinja2.FileSystemLoader(Path(__file__).parent / "templates"), autoescape=False,
                           trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined,
                           ).get_template("results_page.md.j2")
+SIM_TWIN_LINE = "Sim set twin: "  # the first line of simulate_dataset's log (workflow/rules/dataset.smk)
 WHEN_KEYS = {"configs", "metrics", "direction", "profiles"}
 DIRECTIONS = {"below": -1, "above": 1, "off": 0}
 
@@ -143,12 +144,25 @@ def timing(root: Path, rec: dict | None, built_commit: str) -> dict:
             "table": markdown(["rule", "s"], [[k, f"{v:.1f}"] for k, v in per])}
 
 
+def sim_set_twin(root: Path) -> str | None:
+    """Which twin made the main Sim set, in words: rule twin_choice's record, else the first line of
+    simulate_dataset's log (it names dataset.twin and the fit read); None where the root holds neither."""
+    choice = read_json(root / "judge" / "choice" / "choice.json")
+    if choice:
+        return f"the `{choice['sim_set_twin']}` twin ({choice['how']}; `judge/choice/choice.json`)"
+    log = root / "logs" / "sim" / "simulate_dataset.log"
+    first = log.read_text().split("\n", 1)[0] if log.exists() else ""
+    if first.startswith(SIM_TWIN_LINE):
+        return f"{first[len(SIM_TWIN_LINE):]} (`logs/sim/simulate_dataset.log`)"
+    return None
+
+
 def sections(root: Path, k: float = 2.0, link=None) -> dict[str, Section | None]:
     """Every table of ORDER as a Section, or None where its main input is missing; `link(rel)` links a figure."""
     t = {key: read_table(root, key) for key in SOURCES}
     loop_states = root / "loop" / "tables" / "per_state.csv"
     build = {
-        "data": lambda: twin.data_sets(t["data"], t["seed_sweep"], t["table4_markers"]),
+        "data": lambda: twin.data_sets(t["data"], t["seed_sweep"], t["table4_markers"], sim_set_twin(root)),
         "calibration": lambda: twin.calibration(t["calibration"]),
         "loop": lambda: twin.loop(t["loop"], pd.read_csv(loop_states) if loop_states.exists() else None),
         "seed_sweep": lambda: training.seed_sweep_section(t["seed_sweep"], k),
@@ -157,8 +171,8 @@ def sections(root: Path, k: float = 2.0, link=None) -> dict[str, Section | None]
         "table4_maps": lambda: training.table4_maps_section(t["table4_maps"], t["maps_photo"],
                                                     read_json(root / "maps" / "silicone_pose_check.json")),
         "twin_ablation": lambda: training.twin_ablation_section(t["twin_ablation"], k),
-        "recipe_ablation": lambda: recipe_ablation_section(t["recipe_ablation"],
-                                                           read_json(root / "recipe" / "report" / "recipe_report.json")),
+        "recipe_ablation": lambda: recipe_ablation_section(
+            t["recipe_ablation"], read_json(root / "recipe" / "report" / "recipe_report.json"), t["seed_sweep"], k),
         "recipe_crossfit": lambda: recipe_crossfit_section(
             t["recipe_crossfit"], t["recipe_ablation"],
             read_json(root / "recipe" / "report" / "recipe_calibration_crossfit.json"),
