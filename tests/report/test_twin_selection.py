@@ -186,3 +186,24 @@ def test_the_rule_s_table_overrides_compose():
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
         cfg = compose("twin_judge", overrides=["task=table", "trained_with=robust", "seeds=[0,1]"])
     assert cfg.trained_with == "robust" and "recipe" not in cfg
+
+
+def test_a_significant_but_immaterial_gain_keeps_the_simplest_twin():
+    """The tie rule's minimum effect: lower on every one of 10 trials (p 0.001) by 0.001-0.01 px is below the slide
+    loop's keep threshold (0.05 px), so calibrated stays; the same gain at 0.06 px per trial replaces it."""
+    rng = np.random.default_rng(4)
+    whole = Member([], {0: scores(rng, set())}, {0: scores(rng, set())})
+    cal = [3.5805, 1.3109, 1.3395, 1.3053, 1.5289, 1.5805, 2.8424, 1.7956, 1.4164, 1.5782]
+
+    def table(gains):
+        other = [m - g for m, g in zip(cal, gains)]
+        return selection_table([Candidate("calibrated", "x", [whole], float(np.mean(cal)), 1.0, 1.0,
+                                          dict(enumerate(cal, 1))),
+                                Candidate("slide_loop", "x", [whole], float(np.mean(other)), 1.0, 1.0,
+                                          dict(enumerate(other, 1)))])
+
+    df = table([0.001 * (i + 1) for i in range(10)])
+    assert df.loc[df["chosen"], "twin"].item() == "calibrated" and df.loc[1, "p_vs_simpler"] < 0.01
+    assert "not materially better than calibrated" in df.loc[1, "why"] and "0.0055 px < 0.05 px" in df.loc[1, "why"]
+    df = table([0.06 + 0.001 * i for i in range(10)])
+    assert df.loc[df["chosen"], "twin"].item() == "slide_loop" and "mean gain 0.0645 px >= 0.05" in df.loc[1, "why"]

@@ -31,8 +31,7 @@ from palpation.measured_sequences import load_sequence_set
 from palpation.metrics.scores import load_scores
 from palpation.report.markdown import markdown
 from palpation.report.runs import run_dir
-from palpation.report.twin_selection import (COLUMNS, TIE_ALPHA, TIE_TEST, Candidate, Member, selection_table,
-                                             sim_set_choice)
+from palpation.report.twin_selection import COLUMNS, Candidate, Member, rule_text, selection_table, sim_set_choice
 
 log = logging.getLogger(__name__)
 
@@ -153,8 +152,7 @@ def table(cfg: DictConfig) -> dict:
     rows = [[str(r[k]).replace("|", "/") if not isinstance(r[k], float) else f"{r[k]:.3f}" for k in COLUMNS]
             for r in df.to_dict("records")]
     note = f"Models: recipe {c['trained_with']}, every candidate alike.\n\n" if c.get("trained_with") else ""
-    note += (f"Choice: the simplest twin (rows top to bottom) unless a more complex one has a significantly lower "
-             f"held-out slide MAE ({TIE_TEST}, alpha {TIE_ALPHA:g}); `why` gives each row's test.\n\n")
+    note += f"Choice, rows top to bottom: {rule_text()}; `why` gives each row's test.\n\n"
     if made:
         note += f"The main Sim set's twin: {made['sim_set_twin']} ({made['how']}; config dataset.twin).\n\n"
     save_text(c["out"]["md"], f"# Twin on the task ({c['profile']} profile)\n\n{note}" + markdown(list(COLUMNS), rows))

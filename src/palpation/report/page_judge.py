@@ -9,6 +9,7 @@ import pandas as pd
 
 from palpation.report.compare import TITLES, Section, aim_lines, aim_miss
 from palpation.report.markdown import markdown, num
+from palpation.report.twin_selection import TIE_ALPHA, TIE_MIN_GAIN_PX
 
 # (column, sense, target, row): the aims; row "chosen" = the chosen twin's row
 AIMS = (("silicone_ap_crossfit", ">=", 0.36, "chosen"), ("meat_ap", ">=", 0.26, "chosen"),
@@ -73,7 +74,8 @@ def twin_selection_section(df: pd.DataFrame, rounds: pd.DataFrame | None = None)
             "MAE is the error of marker motion about each trial's median on real slides the twin was not fitted "
             "on. The choice (no test label is used) keeps the simplest twin (rows top to bottom) unless a more "
             "complex one has a significantly lower held-out MAE, paired by trial (one-sided Wilcoxon signed-rank, "
-            "alpha 0.05; `twin_selection.csv` column `why`). The slide loop keeps an effect only if its fits that "
+            f"alpha {TIE_ALPHA:g}), by at least {TIE_MIN_GAIN_PX:g} px per trial on average (`twin_selection.csv` "
+            "column `why`). The slide loop keeps an effect only if its fits that "
             "left out a trial of the fitting fold score that trial better (paired test; docs/loop.md \"Slides\"). "
             "Figure: `judge/slide_motion.png`.\n\n"
             + markdown(["Twin", "Fitted on", "Held-out slide MAE (px)", "Vessel ratio sim / real",

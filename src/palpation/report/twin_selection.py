@@ -7,7 +7,8 @@ the two fold twins' models together. A twin fitted on no Silicone trial (calibra
 Meat is never fitted on: every model of a candidate scores it. The choice uses the held-out real-slide
 motion MAE only (a physics criterion, no test label), with a pre-registered tie rule (`choose`): the candidates
 come simplest first (calibrated < photo_loop < slide_loop) and the simplest is kept unless a more complex one is
-significantly better, trial by trial (one-sided Wilcoxon signed-rank over the Silicone trials, alpha 0.05).
+significantly better, trial by trial (one-sided Wilcoxon signed-rank over the Silicone trials, alpha 0.05), by a
+mean gain of at least the slide loop's keep threshold (0.05 px).
 """
 
 from __future__ import annotations
@@ -30,6 +31,10 @@ COLUMNS = ("twin", "fitted_on", "heldout_slide_mae_px", "vessel_ratio_sim", "ves
 # test because the per-trial MAE has outlying trials (Silicone trial 1: 3.6 px against ~1.5 px).
 TIE_ALPHA = 0.05
 TIE_TEST = "one-sided Wilcoxon signed-rank on the per-trial held-out slide MAE"
+# ...and the mean per-trial gain must reach the slide loop's own keep threshold (conf/slide_loop.yaml
+# min_improvement_px, 0.05 px): a twin better by less than the loop would keep an effect for is not a better twin. Added
+# 27 Nov 2026; it changes no committed choice (no complex candidate passed the test there).
+TIE_MIN_GAIN_PX = 0.05
 # config dataset.twin (workflow/rules/judge.smk, rule twin_choice): the evidence's choice or a pinned candidate
 DATASET_TWINS = ("auto", "calibrated", "photo_loop", "slide_loop")
 
@@ -115,10 +120,22 @@ def better_p(simpler: dict[int, float], other: dict[int, float]) -> float:
     return paired_p([simpler[t] for t in trials], [other[t] for t in trials], "wilcoxon")
 
 
-def choose(candidates: list[Candidate], alpha: float = TIE_ALPHA) -> tuple[int, list[float], list[str]]:
+def mean_gain(simpler: dict[int, float], other: dict[int, float]) -> float:
+    """Mean per-trial MAE drop from `simpler` to `other` (px; positive: `other` is better), paired by trial."""
+    return float(np.mean([simpler[t] - other[t] for t in sorted(simpler)]))
+
+
+def rule_text(alpha: float = TIE_ALPHA, min_gain_px: float = TIE_MIN_GAIN_PX) -> str:
+    return (f"simplest first, replaced only if significantly better ({TIE_TEST}, alpha {alpha:g}) by a mean of at "
+            f"least {min_gain_px:g} px per trial")
+
+
+def choose(candidates: list[Candidate], alpha: float = TIE_ALPHA,
+           min_gain_px: float = TIE_MIN_GAIN_PX) -> tuple[int, list[float], list[str]]:
     """The tie rule: candidates simplest first; the incumbent (at first the simplest) is replaced by a more complex
-    candidate only if that one is significantly better than it trial by trial (`better_p` < alpha). Returns the
-    chosen index and, per candidate, the p against the incumbent it met and why it was (not) chosen."""
+    candidate only if that one is significantly better than it trial by trial (`better_p` < alpha) and by a mean gain
+    of at least `min_gain_px`. Returns the chosen index and, per candidate, the p against the incumbent it met and why
+    it was (not) chosen."""
     ok = [i for i, c in enumerate(candidates) if c.trial_mae_px and np.isfinite(c.heldout_slide_mae_px)]
     if not ok:
         raise ValueError("twin selection: no candidate has a finite held-out slide MAE per trial to choose by")
@@ -127,10 +144,14 @@ def choose(candidates: list[Candidate], alpha: float = TIE_ALPHA) -> tuple[int, 
     for i in ok[1:]:
         inc = candidates[best]
         ps[i] = better_p(inc.trial_mae_px, candidates[i].trial_mae_px)
-        n = len(inc.trial_mae_px)
-        if ps[i] < alpha:
+        n, gain = len(inc.trial_mae_px), mean_gain(inc.trial_mae_px, candidates[i].trial_mae_px)
+        if ps[i] < alpha and gain >= min_gain_px:
             why[best] += f"; replaced by {candidates[i].twin}"
-            why[i], best = f"significantly better than {inc.twin} (p {ps[i]:.3g} < {alpha:g}, {n} trials)", i
+            why[i], best = (f"significantly better than {inc.twin} (p {ps[i]:.3g} < {alpha:g}, {n} trials; mean gain "
+                            f"{gain:.3g} px >= {min_gain_px:g})"), i
+        elif ps[i] < alpha:
+            why[i] = (f"significantly but not materially better than {inc.twin} (p {ps[i]:.3g} < {alpha:g}, "
+                      f"{n} trials; mean gain {gain:.3g} px < {min_gain_px:g} px, the slide loop's keep threshold)")
         else:
             why[i] = f"not significantly better than {inc.twin} (p {ps[i]:.3g} >= {alpha:g}, {n} trials)"
     for i, c in enumerate(candidates):
@@ -184,5 +205,5 @@ def sim_set_choice(candidates: list[Candidate], twin: str = "auto", alpha: float
     used = names[best] if twin == "auto" else twin
     how = "the evidence's choice" if twin == "auto" else f"pinned by dataset.twin (the evidence chose {names[best]})"
     return {"dataset_twin": twin, "chosen": names[best], "sim_set_twin": used, "pinned": twin != "auto",
-            "how": how, "rule": f"simplest first, replaced only if significantly better ({TIE_TEST}, alpha {alpha:g})",
+            "how": how, "rule": rule_text(alpha),
             "candidates": rows}
