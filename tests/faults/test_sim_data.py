@@ -119,10 +119,12 @@ def test_simulate_fails_when_every_trajectory_diverged(tmp_path, monkeypatch, fa
     from palpation.twin.runner import BatchResult
 
     write_outputs(tmp_path, [record("trajectory_0000")], [])  # the previous, good run
+    (tmp_path / "m").write_bytes(b"mesh")  # hashed into the set's request key; SensorMesh.load is faked below
     monkeypatch.setattr(simulate.SensorMesh, "load", staticmethod(lambda path: type("M", (), {"resolution": "x"})))
     monkeypatch.setattr(simulate, "run_batches", lambda mesh, twin, reqs, batch_size, **kw: [BatchResult(
         records=[], failed=[failed(r.name) for r in reqs], frames=0, wall_s=0.0)])
-    cfg = OmegaConf.create({"twin": OmegaConf.structured(TwinConfig), "mesh": "m", "set": "randomised", "seed": 1,
+    cfg = OmegaConf.create({"twin": OmegaConf.structured(TwinConfig), "mesh": str(tmp_path / "m"), "set": "randomised",
+                            "seed": 1,
                             "n_pairs": 1, "heading_offset_deg": 0.0, "batch_size": 2, "progress": False,
                             "max_frames": None, "track": False, "dataset": {"recentre_k_n": False},
                             "out": {"dir": str(tmp_path)}})

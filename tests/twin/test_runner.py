@@ -98,11 +98,33 @@ def test_leaving_the_batch_frees_the_twin(mesh, binding):
     assert res.records[0].markers.shape == (3, 127, 2) and alive == 0
 
 
-def compose_simulate(mesh_path: Path, out_dir: Path, workers: int = 0):
+def compose_simulate(mesh_path: Path, out_dir: Path, workers: int = 0, extra: tuple = ()):
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
         return compose(config_name="simulate", overrides=[
             "set=randomised", "n_pairs=1", "max_frames=84", "progress=false", "track=false",
-            f"mesh={mesh_path}", f"out.dir={out_dir}", f"workers={workers}"])
+            f"mesh={mesh_path}", f"out.dir={out_dir}", f"workers={workers}", *extra])
+
+
+def test_a_set_with_the_same_request_is_copied_not_simulated(tmp_path, mesh):
+    """reuse=[manifest]: the same draws, twin and mesh copy the finished set byte for byte (rule simulate_dataset and
+    the chosen candidate's set); another seed or twin parameter simulates anew; a bad path is a one-line error."""
+    from palpation.apps.simulate import run
+
+    mesh_path = tmp_path / "mesh.npz"
+    mesh.save(mesh_path)
+    first = run(compose_simulate(mesh_path, tmp_path / "a"))
+    source = Path(first["manifest"])
+    copied = run(compose_simulate(mesh_path, tmp_path / "b", extra=(f"reuse=[{source}]",)))
+    assert copied["reused"] == 1 and copied["n_files"] == 2
+    a, b = json.loads(source.read_text()), json.loads(Path(copied["manifest"]).read_text())
+    assert b["reused_from"] == str(source) and b["request_key"] == a["request_key"] and b["files"] == a["files"]
+    for name in ("trajectory_0000.npz", "trajectory_0001.npz"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
+    for extra in (("seed=7",), ("twin.contact.c_n=5.0",)):
+        other = run(compose_simulate(mesh_path, tmp_path / "c", extra=(f"reuse=[{source}]", *extra)))
+        assert other["reused"] == 0 and "reused_from" not in json.loads(Path(other["manifest"]).read_text())
+    with pytest.raises(FileNotFoundError, match="config reuse: .*nope.json is not a readable Sim-set manifest"):
+        run(compose_simulate(mesh_path, tmp_path / "d", extra=(f"reuse=[{tmp_path / 'nope.json'}]",)))
 
 
 def test_app_same_seed_is_bit_identical(tmp_path, mesh):

@@ -247,6 +247,15 @@ def dataset_fit(wildcards=None):
     return judge_fit(f"slide_loop_{JUDGE_FOLDS[0]}" if DATASET_TWIN == "slide_loop" else DATASET_TWIN)
 
 
+def candidate_sim_sets(wildcards=None):
+    """With dataset.twin auto: the candidates' Sim sets that this run makes anyway (calibrated: the twin ablation's;
+    photo_loop: its own, judge.smk), so that simulate_dataset copies the chosen one's instead of simulating the same
+    draws again (the app compares request keys: draws, twin, mesh; another twin's set is left alone)."""
+    if DATASET_TWIN != "auto" or not (TWIN_ABL["seeds"] or JUDGE["seeds"]):
+        return []
+    return [rules.simulate_dataset_calibrated.output.manifest] + ([PHOTO_SIM] if JUDGE_OWN_PHOTO else [])
+
+
 def judge_runs_root(twin):
     if twin in JUDGE_REUSE:
         return JUDGE_REUSE[twin]["runs"]

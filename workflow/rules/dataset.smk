@@ -11,6 +11,7 @@ rule simulate_dataset:
         # the fitted twin sets every parameter the draws leave alone: dataset.twin's (common.smk dataset_fit; auto:
         # rule twin_choice's, the candidate the held-out real-slide MAE chooses, judge.smk)
         fit=dataset_fit,
+        reuse=candidate_sim_sets,
     output:
         manifest="results/sim/dataset/manifest.json",
     params:
@@ -24,6 +25,7 @@ rule simulate_dataset:
         recentre=str(DATASET["recentre_k_n"]).lower(),
         fit_args=lambda wildcards, input: fit_overrides(input.fit),
         source=f"dataset.twin={DATASET_TWIN}",  # logged: which twin, chosen or pinned
+        reuse=lambda wildcards, input: "'reuse=[" + ",".join(getattr(input, "reuse", [])) + "]'",
     # the main Sim set is on the paper profile's critical path (loop -> Sim set -> training): it takes the next GPU
     # slot before the ablations' jobs (a device run lost 20 s to a twin-ablation training taking it first)
     priority: 10
@@ -40,7 +42,7 @@ rule simulate_dataset:
         " SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.simulate set=randomised"
         " n_pairs={params.n_pairs} seed={params.seed}"
         " dataset.recentre_k_n={params.recentre}"
-        " {params.twin} {params.fit_args} mesh={input.mesh} out.dir={params.outdir}"
+        " {params.twin} {params.fit_args} {params.reuse} mesh={input.mesh} out.dir={params.outdir}"
         " {params.hydra} >> {log} 2>&1"
 
 

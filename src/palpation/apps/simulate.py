@@ -7,6 +7,8 @@ heading offset, k_n, c_n per trial from one default_rng(seed) stream; even files
 
 from __future__ import annotations
 
+import hashlib
+import json
 import logging
 import time
 from pathlib import Path
@@ -18,7 +20,7 @@ from omegaconf import DictConfig, OmegaConf
 from palpation.config_check import app_main
 from palpation.twin.config import REF_LENGTH_SCALE, TwinConfig, from_reference_units
 from palpation.twin.mesh import SensorMesh
-from palpation.twin.output import write_outputs
+from palpation.twin.output import copy_outputs, write_outputs
 from palpation.twin.runner import EnvRequest, run_batches
 
 log = logging.getLogger(__name__)
@@ -67,11 +69,42 @@ def trajectory_set(name: str, seed: int, n_pairs: int = 1,
     raise ValueError(f"unknown trajectory set '{name}': use canonical, vessel_slide or randomised")
 
 
+def request_key(cfg: DictConfig, k_n_range: tuple[float, float]) -> str:
+    """sha256 of everything that decides a set's trajectories: the draws, the frame cut, the twin and the mesh file.
+    Not the batch size or threads (they change no record: twin.runner.run_batches) or the output folder."""
+    spec = {"set": cfg.set, "seed": cfg.seed, "n_pairs": cfg.n_pairs, "heading_offset_deg": cfg.heading_offset_deg,
+            "k_n_range": list(k_n_range), "max_frames": cfg.max_frames,
+            "twin": OmegaConf.to_container(cfg.twin, resolve=True),
+            "mesh_sha256": hashlib.sha256(Path(cfg.mesh).read_bytes()).hexdigest()}
+    return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()
+
+
+def reusable(paths, key: str) -> Path | None:
+    """The first manifest of `paths` (config `reuse`) whose set was made from the same request key, else None."""
+    for path in paths or []:
+        path = Path(path)
+        try:
+            meta = json.loads(path.read_text())
+        except (OSError, ValueError) as err:
+            raise FileNotFoundError(f"config reuse: {path} is not a readable Sim-set manifest ({err}); "
+                                    "name manifest.json files of finished sets, or reuse=[]") from None
+        if meta.get("request_key") == key and not meta.get("failed"):
+            return path
+    return None
+
+
 def run(cfg: DictConfig) -> dict:
     twin: TwinConfig = OmegaConf.to_object(cfg.twin)
-    mesh = SensorMesh.load(cfg.mesh)
     # quirk 4: optionally centre the k_n draws on the twin's (fitted) k_n, in reference units
     centre = twin.contact.k_n * REF_LENGTH_SCALE if cfg.dataset.recentre_k_n else None
+    key = request_key(cfg, k_n_draw_range(centre))
+    same = reusable(cfg.get("reuse"), key)
+    if same is not None:  # the same trajectories exist (e.g. the chosen twin's candidate set): copy, not re-simulate
+        manifest = copy_outputs(same, cfg.out.dir, {"reused_from": str(same)})
+        log.info("same request key as %s: its files copied to %s, nothing simulated", same, cfg.out.dir)
+        return _tracked(cfg, {"manifest": str(manifest), "n_files": len(json.loads(manifest.read_text())["files"]),
+                              "n_failed": 0, "reused": 1})
+    mesh = SensorMesh.load(cfg.mesh)
     requests = trajectory_set(cfg.set, cfg.seed, cfg.n_pairs, cfg.heading_offset_deg,
                               k_n_draw_range(centre))
     records, failed = [], []
@@ -83,9 +116,9 @@ def run(cfg: DictConfig) -> dict:
     wall = time.perf_counter() - start  # the batches' wall time (side by side in threads on a CPU)
     meta = {"set": cfg.set, "seed": cfg.seed, "mesh": str(cfg.mesh), "resolution": mesh.resolution,
             "device": twin.device, "sim_wall_s": wall, "max_frames": cfg.max_frames,
-            "twin": OmegaConf.to_container(cfg.twin, resolve=True)}
+            "twin": OmegaConf.to_container(cfg.twin, resolve=True), "request_key": key}
     manifest = write_outputs(Path(cfg.out.dir), records, failed, meta=meta)
-    summary = {"manifest": str(manifest), "n_files": len(records), "n_failed": len(failed),
+    summary = {"manifest": str(manifest), "n_files": len(records), "n_failed": len(failed), "reused": 0,
                "sim_wall_s": wall, "total_wall_s": time.perf_counter() - start}
     for rec in records:
         log.info("%s: %s, %d frames, %d with contact, positive rate %.4f", rec.name, rec.kind,
@@ -95,6 +128,10 @@ def run(cfg: DictConfig) -> dict:
     if requests and not records:  # nothing usable: fail the job, the manifest says which diverged
         raise ValueError(f"all {len(failed)} trajectories diverged, none written (failures listed in {manifest}); "
                          "check the twin's stiffness and time step (twin.material.E, twin.contact.k_n, twin.integrator.dt)")
+    return _tracked(cfg, summary)
+
+
+def _tracked(cfg: DictConfig, summary: dict) -> dict:
     if cfg.track:
         from palpation.tracking import log_metrics, start_run
 

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from palpation.io import read_npz, save_json, save_npz
+from palpation.io import atomic_path, read_npz, save_json, save_npz
 
 FORMAT = "palpation-sim/1"
 KEYS = ("markers", "labels", "centreline_px", "contact", "T_BA", "frame_index", "centreline_A",
@@ -107,13 +108,7 @@ def write_outputs(out_dir: str | os.PathLike, records: list[TrajectoryRecord],
     A rerun into the same folder first removes the previous manifest and run's trajectories, so none
     is left beside the new ones (and readers use only the manifest's files anyway)."""
     out_dir = Path(out_dir)
-    path = out_dir / manifest_name
-    new_names = {f"{rec.name}.npz" for rec in records}
-    old = previous_files(out_dir, path)
-    path.unlink(missing_ok=True)  # first: a run killed below leaves no manifest naming stale files
-    for stale in old:
-        if stale.name not in new_names:
-            stale.unlink(missing_ok=True)
+    path = _clear(out_dir, manifest_name, {f"{rec.name}.npz" for rec in records})
     manifest = Manifest(meta={"format": FORMAT, **(meta or {})})
     for rec in records:
         save_trajectory(out_dir / f"{rec.name}.npz", rec)
@@ -123,4 +118,31 @@ def write_outputs(out_dir: str | os.PathLike, records: list[TrajectoryRecord],
     for bad in failed:
         manifest.failed.append(vars(bad).copy())
     save_json(path, {"files": manifest.files, "failed": manifest.failed, **manifest.meta})
+    return path
+
+
+def copy_outputs(src_manifest: str | os.PathLike, out_dir: str | os.PathLike, meta: dict,
+                 manifest_name: str = "manifest.json") -> Path:
+    """Copy a finished set (its manifest's files) into `out_dir` with the same discipline as write_outputs: the
+    earlier run's files cleared first, each file written whole, the manifest last, its meta updated by `meta`."""
+    src_manifest = Path(src_manifest)
+    data = json.loads(src_manifest.read_text())
+    out_dir = Path(out_dir)
+    path = _clear(out_dir, manifest_name, {Path(e["file"]).name for e in data["files"]})
+    for entry in data["files"]:
+        name = Path(entry["file"]).name
+        with atomic_path(out_dir / name) as tmp:
+            shutil.copyfile(src_manifest.parent / name, tmp)
+    save_json(path, {**data, **meta})
+    return path
+
+
+def _clear(out_dir: Path, manifest_name: str, new_names: set[str]) -> Path:
+    """Remove the manifest, then the earlier run's trajectories not about to be rewritten; returns the manifest path."""
+    path = out_dir / manifest_name
+    old = previous_files(out_dir, path)
+    path.unlink(missing_ok=True)  # first: a run killed below leaves no manifest naming stale files
+    for stale in old:
+        if stale.name not in new_names:
+            stale.unlink(missing_ok=True)
     return path
