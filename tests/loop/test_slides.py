@@ -193,3 +193,21 @@ def test_motion_decomposition_separates_common_translation_and_affine_motion():
     e = replay_errors(np.stack([markers, np.broadcast_to(rest, markers.shape)]), markers, s.found)
     assert e["common_error_px"][0] < 1e-9 and e["rest_error_px"][0] < 1e-9
     assert e["common_error_px"][1] == pytest.approx(1.2) and e["sim_common_px"][1] == 0.0
+
+
+def test_folds_side_by_side_give_the_same_loop():
+    """fold_workers 2 (two spawned processes, the app's picklable Replayer with the real twin) = one fold after the
+    other, row for row and parameter for parameter, on the CPU."""
+    import json
+
+    from palpation.apps.slide_loop import Replayer
+
+    s = toy_set(2, 2, step_mm=1.5)
+    settings = SlideLoopSettings(effects={"compliant_phantom": {"k_f": [3e7]}}, base={"k_f": 1e7}, max_rounds=1,
+                                 min_improvement_px=0.0, search=SearchSettings(sampler="grid"),
+                                 ).validate()
+    replayer = Replayer(TwinConfig(), None, s, 0.0)
+    apart, together = (run_slide_loop(replayer, s, settings, [1, 2], workers=w) for w in (1, 2))
+    assert json.dumps(apart, sort_keys=True, default=str) == json.dumps(together, sort_keys=True, default=str)
+    assert [(r["fold"], r["effect_added"]) for r in together["rows"]] == [
+        ("odd", "none"), ("odd", "compliant_phantom"), ("even", "none"), ("even", "compliant_phantom")]

@@ -48,6 +48,26 @@ def select(sset: SequenceSet, trials, frames) -> tuple[SequenceSet, list[int]]:
     return sub, numbers
 
 
+class Replayer:
+    """The loop's `evaluate`: candidates replayed in the twin of the real scene. Picklable (the mesh, marker binding
+    and scene are built on first use, in whichever process runs the fold)."""
+
+    def __init__(self, twin: TwinConfig, mesh_path: str | None, sset: SequenceSet, lead_in_mm: float):
+        self.twin, self.mesh_path, self.sset, self.lead_in_mm = twin, mesh_path, sset, lead_in_mm
+        self._built = None
+
+    def __getstate__(self) -> dict:
+        return {**self.__dict__, "_built": None}
+
+    def __call__(self, part: SequenceSet, candidates: list[dict]):
+        if self._built is None:
+            mesh = SensorMesh.load(self.mesh_path) if self.mesh_path else cached_sensor_mesh(self.twin.mesh.resolution)
+            self._built = (mesh, bind_markers(mesh.nodes, mesh.dome_nodes, self.sset.rest), make_scene(self.sset))
+        mesh, binding, scene = self._built
+        return replay(mesh, self.twin, binding, part, scene, candidates, device=self.twin.device,
+                      lead_in_mm=self.lead_in_mm)
+
+
 def run(cfg: DictConfig) -> dict:
     twin: TwinConfig = OmegaConf.to_object(cfg.twin)
     grid = OmegaConf.to_container(cfg.effects, resolve=True)
@@ -61,15 +81,11 @@ def run(cfg: DictConfig) -> dict:
         raise ValueError(f"conf/slide_loop.yaml: lead_in_mm = {lead_in} must be >= 0 (mm slid in before frame 0)")
     sset = load_sequence_set(cfg.sequences)
     sub, numbers = select(sset, cfg.trials, cfg.frames)
-    mesh = SensorMesh.load(cfg.mesh) if cfg.mesh else cached_sensor_mesh(twin.mesh.resolution)
-    binding = bind_markers(mesh.nodes, mesh.dome_nodes, sset.rest)
-    scene = make_scene(sset)
-
-    def evaluate(part: SequenceSet, candidates: list[dict]):
-        return replay(mesh, twin, binding, part, scene, candidates, device=twin.device, lead_in_mm=lead_in)
-
+    workers = int(cfg.fold_workers)
+    if workers not in (1, 2):
+        raise ValueError(f"conf/slide_loop.yaml: fold_workers = {workers}; use 1 (folds in turn) or 2 (side by side)")
     start = time.perf_counter()
-    result = run_slide_loop(evaluate, sub, settings, numbers)
+    result = run_slide_loop(Replayer(twin, cfg.mesh, sset, lead_in), sub, settings, numbers, workers)
     # the floor a twin must beat: no motion at all (every frame predicted as the rest template)
     still = np.broadcast_to(sub.rest, sub.markers.shape).astype(np.float64)
     for key, fn in (("static_mae_px", frame_mae), ("static_mae_abs_px", frame_mae_abs)):

@@ -19,6 +19,8 @@ out; the best-ranked effect whose left-out trials improve significantly (paired 
 from __future__ import annotations
 
 import logging
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -283,16 +285,19 @@ def run_fold(evaluate: Evaluate, fit: SequenceSet, held: SequenceSet, settings: 
     return rows, params, tries
 
 
-def run_slide_loop(evaluate: Evaluate, sset: SequenceSet, settings: SlideLoopSettings,
-                   trial_numbers: list[int]) -> dict:
-    """Both folds: rows (COLUMNS), per-fold parameters per round, and the folds' trial numbers."""
+def run_slide_loop(evaluate: Evaluate, sset: SequenceSet, settings: SlideLoopSettings, trial_numbers: list[int],
+                   workers: int = 1) -> dict:
+    """Both folds: rows (COLUMNS), per-fold parameters per round, and the folds' trial numbers. The folds share
+    nothing, so `workers` 2 runs them in two spawned processes (`evaluate` must then pickle: apps.slide_loop's
+    Replayer) with the same result as one after the other (tests/loop/test_slides.py)."""
     folds = trial_folds(trial_numbers)
-    rows, params, gate = [], {}, []
-    for fold, idx in folds.items():
-        fit, held = sset.subset(idx), sset.subset(folds[other(fold)])
-        fold_rows, fold_params, tries = run_fold(evaluate, fit, held, settings, fold)
-        rows += fold_rows
-        params[fold] = fold_params
-        gate += tries
-    return {"rows": rows, "params": params, "gate": gate,
+    jobs = [(evaluate, sset.subset(idx), sset.subset(folds[other(fold)]), settings, fold) for fold, idx in folds.items()]
+    if workers > 1:
+        with ProcessPoolExecutor(min(workers, len(jobs)), mp_context=multiprocessing.get_context("spawn")) as pool:
+            parts = list(pool.map(run_fold, *zip(*jobs)))
+    else:
+        parts = [run_fold(*job) for job in jobs]
+    return {"rows": [r for rows, _, _ in parts for r in rows],
+            "params": {fold: params for fold, (_, params, _) in zip(folds, parts)},
+            "gate": [t for _, _, tries in parts for t in tries],
             "folds": {f: [trial_numbers[i] for i in idx] for f, idx in folds.items()}}
