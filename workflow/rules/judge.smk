@@ -57,6 +57,9 @@ rule judge_slides:
         fit_args=lambda wildcards, input: fit_overrides(input.fit),
         stem=lambda wildcards, input: input.npz[: -len(".npz")],
         hydra=lambda wildcards, output: hydra_dir(output.json),
+    # with dataset.twin auto the replays lie on the main Sim set's path (slide loop -> replays -> twin_choice); the
+    # paper run at 9665dd9 had them wait 20-40 s for GPU slots that twin-ablation trainings took first
+    priority: 10
     resources:
         gpu=GPU,
     log:
@@ -72,7 +75,9 @@ rule judge_slides:
 
 
 # A candidate's own Sim set (JUDGE_OWN_SETS: the fold twins, and photo_loop where the main set is not pinned to it):
-# the same draws as rule simulate_dataset, simulated with that twin.
+# the same draws as rule simulate_dataset, simulated with that twin. It keeps simulate_dataset's priority: with
+# dataset.twin auto the main set waits for photo_loop's (it copies the chosen candidate's set, common.smk
+# candidate_sim_sets).
 use rule simulate_dataset as judge_dataset with:
     input:
         mesh=twin_mesh(),
