@@ -97,7 +97,8 @@ def run(cfg: DictConfig) -> dict:
     twin: TwinConfig = OmegaConf.to_object(cfg.twin)
     # quirk 4: optionally centre the k_n draws on the twin's (fitted) k_n, in reference units
     centre = twin.contact.k_n * REF_LENGTH_SCALE if cfg.dataset.recentre_k_n else None
-    key = request_key(cfg, k_n_draw_range(centre))
+    k_n_range = k_n_draw_range(centre)
+    key = request_key(cfg, k_n_range)
     same = reusable(cfg.get("reuse"), key)
     if same is not None:  # the same trajectories exist (e.g. the chosen twin's candidate set): copy, not re-simulate
         manifest = copy_outputs(same, cfg.out.dir, {"reused_from": str(same)})
@@ -105,8 +106,7 @@ def run(cfg: DictConfig) -> dict:
         return _tracked(cfg, {"manifest": str(manifest), "n_files": len(json.loads(manifest.read_text())["files"]),
                               "n_failed": 0, "reused": 1})
     mesh = SensorMesh.load(cfg.mesh)
-    requests = trajectory_set(cfg.set, cfg.seed, cfg.n_pairs, cfg.heading_offset_deg,
-                              k_n_draw_range(centre))
+    requests = trajectory_set(cfg.set, cfg.seed, cfg.n_pairs, cfg.heading_offset_deg, k_n_range)
     records, failed = [], []
     start = time.perf_counter()
     for res in run_batches(mesh, twin, requests, cfg.batch_size, device=twin.device, progress=cfg.progress,

@@ -7,7 +7,7 @@ import math
 
 import pandas as pd
 
-from palpation.report.compare import TITLES, Section, aim_lines, aim_miss
+from palpation.report.compare import TITLES, Section, aim_lines, aim_miss, compare
 from palpation.report.markdown import markdown, num
 from palpation.report.page_training import title
 
@@ -53,13 +53,12 @@ def sweep_mismatch(df: pd.DataFrame, sweep: pd.DataFrame | None, k: float = 2.0)
     out = []
     for _, r in df[(df["recipe"] == "reference") & (df["switch_off"] == "none")].iterrows():
         theirs = sweep.loc[sweep["config"] == r["config"], "ap"]
-        if len(theirs) < 2 or int(r["seeds"]) < 2:
+        if len(theirs) < 2:
             continue
-        sigma = math.hypot(float(r["ap_std"]), float(theirs.std()))
-        z = abs(float(r["ap_mean"]) - theirs.mean()) / sigma if sigma > 0 else math.inf
-        if z > k:
+        c = compare(r["ap_mean"], r["ap_std"], theirs.mean(), theirs.std(), k, n_ours=int(r["seeds"]))
+        if c.within is False:
             out.append(f"{title(r['config'])}, reference: AP {num(r['ap_mean'])} here vs {num(theirs.mean())} in the "
-                       f"seed sweep ({z:.1f}σ apart), the same recipe: this table's runs were not trained on the seed "
+                       f"seed sweep ({c.verdict()}), the same recipe: this table's runs were not trained on the seed "
                        "sweep's Sim set (or at its sizes), so compare its rows with each other, not with the tables "
                        "above.")
     return out

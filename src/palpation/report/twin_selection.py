@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 from sklearn.metrics import average_precision_score, roc_auc_score
 
-from palpation.loop.slide_gate import paired_p
+from palpation.loop.slide_gate import GateSettings, verdict
 from palpation.markers.lattice import N_MARKERS
 from palpation.metrics.scores import Scores
 
@@ -111,18 +111,13 @@ def candidate_row(c: Candidate) -> dict:
             "p_vs_simpler": float("nan"), "why": ""}
 
 
-def better_p(simpler: dict[int, float], other: dict[int, float]) -> float:
-    """One-sided p that `other` has the lower held-out MAE, paired by trial (exact signed-rank for small n)."""
+def paired_trials(simpler: dict[int, float], other: dict[int, float]) -> tuple[np.ndarray, np.ndarray]:
+    """The two candidates' held-out MAE over the same trials, in trial order (the tie rule's pairs)."""
     if sorted(simpler) != sorted(other):
         raise ValueError(f"twin selection: the tie rule pairs trials, but the replays hold trials {sorted(simpler)} "
                          f"and {sorted(other)}; rerun rule judge_slides so every candidate replays the same trials")
     trials = sorted(simpler)
-    return paired_p([simpler[t] for t in trials], [other[t] for t in trials], "wilcoxon")
-
-
-def mean_gain(simpler: dict[int, float], other: dict[int, float]) -> float:
-    """Mean per-trial MAE drop from `simpler` to `other` (px; positive: `other` is better), paired by trial."""
-    return float(np.mean([simpler[t] - other[t] for t in sorted(simpler)]))
+    return np.array([simpler[t] for t in trials]), np.array([other[t] for t in trials])
 
 
 def rule_text(alpha: float = TIE_ALPHA, min_gain_px: float = TIE_MIN_GAIN_PX) -> str:
@@ -133,7 +128,7 @@ def rule_text(alpha: float = TIE_ALPHA, min_gain_px: float = TIE_MIN_GAIN_PX) ->
 def choose(candidates: list[Candidate], alpha: float = TIE_ALPHA,
            min_gain_px: float = TIE_MIN_GAIN_PX) -> tuple[int, list[float], list[str]]:
     """The tie rule: candidates simplest first; the incumbent (at first the simplest) is replaced by a more complex
-    candidate only if that one is significantly better than it trial by trial (`better_p` < alpha) and by a mean gain
+    candidate only if that one is significantly better than it trial by trial (p < alpha) and by a mean gain
     of at least `min_gain_px`. Returns the chosen index and, per candidate, the p against the incumbent it met and why
     it was (not) chosen."""
     ok = [i for i, c in enumerate(candidates) if c.trial_mae_px and np.isfinite(c.heldout_slide_mae_px)]
@@ -143,9 +138,11 @@ def choose(candidates: list[Candidate], alpha: float = TIE_ALPHA,
     why[best] = "simplest twin with a held-out slide MAE; kept unless a more complex one is significantly better"
     for i in ok[1:]:
         inc = candidates[best]
-        ps[i] = better_p(inc.trial_mae_px, candidates[i].trial_mae_px)
-        n, gain = len(inc.trial_mae_px), mean_gain(inc.trial_mae_px, candidates[i].trial_mae_px)
-        if ps[i] < alpha and gain >= min_gain_px:
+        # the slide loop's own keep decision (one-sided paired test and mean gain), here on the held-out trials
+        v = verdict(*paired_trials(inc.trial_mae_px, candidates[i].trial_mae_px),
+                    GateSettings(test="wilcoxon", alpha=alpha), min_gain_px)
+        ps[i], n, gain = v["p"], v["n_trials"], v["gain_px"]
+        if v["passed"]:
             why[best] += f"; replaced by {candidates[i].twin}"
             why[i], best = (f"significantly better than {inc.twin} (p {ps[i]:.3g} < {alpha:g}, {n} trials; mean gain "
                             f"{gain:.3g} px >= {min_gain_px:g})"), i
