@@ -108,7 +108,8 @@ def test_table_task_end_to_end(tmp_path):
            "candidates": {"calibrated": {"fitted_on": "photos"},
                           "slide_loop": {"fitted_on": "slides", "folds": ["odd", "even"]}},
            "runs": {}, "slides": {}, "out": {k: str(tmp_path / "out" / v) for k, v in
-                                             {"csv": "t.csv", "md": "t.md", "figure": "fig"}.items()}}
+                                             {"csv": "t.csv", "md": "t.md", "figure": "fig",
+                                                                "bounds": "b.csv"}.items()}}
     for name, fold, scored, fitted, mae in (("calibrated", None, TRIALS, [], 3.0), ("slide_loop_odd", "odd", [2, 4], [1, 3], 2.0),
                                             ("slide_loop_even", "even", [1, 3], [2, 4], 2.5)):
         root = tmp_path / "runs" / name
@@ -130,6 +131,8 @@ def test_table_task_end_to_end(tmp_path):
     assert df.loc[df["twin"] == "slide_loop", "heldout_slide_mae_px"].item() == pytest.approx(2.25)
     assert df.loc[1, "p_vs_simpler"] == pytest.approx(1 / 16) and df.loc[0, "why"].startswith("chosen: simplest")
     assert (tmp_path / "out" / "fig.png").exists() and (tmp_path / "out" / "fig.pdf").exists()
+    bounds = pd.read_csv(tmp_path / "out" / "b.csv")  # on the replays' trials and frames (loop.slide_diagnosis)
+    assert list(bounds["predictor"])[0] == "no_motion" and bounds["change_vs_no_motion"].iloc[0] == 0
     # rule twin_choice (the main Sim set's twin) decides from the same replays by the same function: the same twin,
     # and the table refuses a choice.json that names another (stale replays on one side)
     from palpation.apps.twin_judge import choice
@@ -145,6 +148,21 @@ def test_table_task_end_to_end(tmp_path):
     save_json(tmp_path / "out" / "stale.json", {**made, "chosen": "slide_loop"})
     with pytest.raises(ValueError, match="stale.json chose slide_loop but the table chooses calibrated"):
         table(OmegaConf.create({**cfg, "choice": str(tmp_path / "out" / "stale.json")}))
+
+
+def test_the_page_reads_the_slide_loop_aim_against_the_drift_bounds():
+    from palpation.report.page_judge import reachable
+
+    df = pd.DataFrame({"twin": ["calibrated", "slide_loop"], "heldout_slide_mae_px": [2.0, 2.01]})
+    bounds = pd.DataFrame({"predictor": ["no_motion", "other_fold_drift", "own_translation", "own_affine"],
+                           "uses_heldout_truth": [False, False, True, True], "heldout_mae_px": [2.0, 2.02, 1.5, 1.2],
+                           "change_vs_no_motion": [0.0, 0.01, -0.25, -0.4]})
+    text, = reachable(df, bounds)
+    assert "held-out MAE <= 1.400 px (30 % below calibrated's 2.000)" in text
+    assert "other fold drift 2.020 px (+1.0 %)" in text and "own affine 1.200 px (-40.0 %)" in text
+    assert "Even own translation misses it" in text
+    bounds.loc[2, "heldout_mae_px"] = 1.3  # a bound that reaches the aim is not called a miss
+    assert "misses it" not in reachable(df, bounds)[0]
 
 
 def test_results_page_section_checks_the_aims():

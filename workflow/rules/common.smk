@@ -223,7 +223,8 @@ JUDGE_OWN_SETS = ([] if JUDGE_PHOTO_IS_MAIN else ["photo_loop"]) + [f"slide_loop
 JUDGE_RUN = str(run_dir(f"{JUDGE_DIR}/train/{{twin}}", "{exp}", "{clip_len}", "{seed}"))
 JUDGE_EXPERIMENTS = ["A-to-B", "A-to-C"]  # Sim -> Silicone (cross-fitted), Sim -> Meat: both train on Sim
 JUDGE_FILES = (
-    [f"{JUDGE_DIR}/{n}" for n in ("twin_selection.csv", "twin_selection.md", "slide_motion.png", "slide_motion.pdf")]
+    [f"{JUDGE_DIR}/{n}" for n in ("twin_selection.csv", "twin_selection.md", "slide_motion.png", "slide_motion.pdf",
+                                  "drift_bounds.csv")]
     if JUDGE["seeds"] else []
 )
 

@@ -205,6 +205,7 @@ rule twin_selection:
         md=f"{JUDGE_DIR}/twin_selection.md",
         png=f"{JUDGE_DIR}/slide_motion.png",
         pdf=f"{JUDGE_DIR}/slide_motion.pdf",
+        bounds=f"{JUDGE_DIR}/drift_bounds.csv",  # what a held-out slide MAE can reach without a twin
     params:
         rule="twin_selection",
         py=PY,
@@ -227,4 +228,5 @@ rule twin_selection:
         "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.twin_judge task=table profile={params.profile}"
         " 'seeds={params.seeds}' clip_len={params.clip_len} trained_with={params.recipe} sequences={params.stem}"
         " {params.runs} {params.slides} choice={input.choice}"
-        " out.csv={output.csv} out.md={output.md} out.figure={params.figure} {params.hydra} > {log} 2>&1"
+        " out.csv={output.csv} out.md={output.md} out.figure={params.figure} out.bounds={output.bounds}"
+        " {params.hydra} > {log} 2>&1"

@@ -27,7 +27,7 @@ done
 mkdir -p "$out"
 export PYTHONPATH="$PWD/src${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 targets="results/judge/twin_selection.csv results/judge/twin_selection.md results/judge/slide_motion.png
-  results/judge/slide_motion.pdf results/loop_slides/loop_slides.csv"
+  results/judge/slide_motion.pdf results/judge/drift_bounds.csv results/loop_slides/loop_slides.csv"
 if ! device_attach "$out" snakemake; then  # one run at a time: a second call waits for the one going
   device=$(sed -n 's/^device: *\([a-z]*\).*/\1/p' "conf/workflow/$profile.yaml")
   device_check_warp "gpu_judge: the $profile profile runs on cuda" "$device" hydra optuna snakemake || exit 3
@@ -44,7 +44,7 @@ device_wait "$out" snakemake
 rc=$DEVICE_RC
 device_progress "$out" snakemake
 for f in results/judge/twin_selection.csv results/judge/twin_selection.md results/judge/slide_motion.png \
-  results/judge/slide_motion.pdf results/loop_slides/loop_slides.csv results/loop_slides/slide_loop.json \
+  results/judge/slide_motion.pdf results/judge/drift_bounds.csv results/loop_slides/loop_slides.csv results/loop_slides/slide_loop.json \
   results/judge/choice/choice.json; do
   if [ -f "$f" ]; then cp "$f" "$out/"; else rm -f "$out/$(basename "$f")"; fi  # no stale copy
 done

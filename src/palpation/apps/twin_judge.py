@@ -9,7 +9,8 @@ task=choice    -> `out.choice` (choice.json: candidates, MAEs, p, chosen, why) +
                  twin (dataset_twin: auto = the evidence's choice by the held-out slide MAE, or a pinned candidate),
                  from the replays alone (report.twin_selection.sim_set_choice, the table's own choice function).
 task=table     -> `out.csv` + `out.md` (report.twin_selection: one row per candidate, `chosen` by the held-out
-                 slide MAE with the tie rule: simplest first), `out.figure` (.png/.pdf: real vs the chosen twin's motion over one trial).
+                 slide MAE with the tie rule: simplest first), `out.figure` (.png/.pdf: real vs the chosen twin's motion over one trial),
+                 `out.bounds` (drift_bounds.csv: the held-out MAE that predictors without a twin reach, loop.slide_diagnosis).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from palpation.apps.slide_loop import select
 from palpation.config_check import app_main
 from palpation.io import csv_text, read_json, read_npz, save_json, save_npz, save_text
 from palpation.loop.folds import trial_folds
+from palpation.loop.slide_diagnosis import BOUNDS_COLUMNS, drift_bounds
 from palpation.loop.slide_twins import (heldout_trials, read_slide_loop, scene_params, schedule_of, score,
                                         write_fold_twin)
 from palpation.measured_sequences import load_sequence_set
@@ -157,8 +159,20 @@ def table(cfg: DictConfig) -> dict:
         note += f"The main Sim set's twin: {made['sim_set_twin']} ({made['how']}; config dataset.twin).\n\n"
     save_text(c["out"]["md"], f"# Twin on the task ({c['profile']} profile)\n\n{note}" + markdown(list(COLUMNS), rows))
     _figure(c, chosen, replays[chosen])
+    _bounds(c, [r for reps in replays.values() for r in reps])
     log.info("twin selection: chosen %s -> %s", chosen, c["out"]["csv"])
     return {"chosen": chosen, "rows": df.to_dict("records")}
+
+
+def _bounds(c: dict, reps: list[dict]) -> None:
+    """out.bounds: the held-out MAE of predictors that need no twin (loop.slide_diagnosis.drift_bounds) on the
+    replays' trials and frames, so the page can read the slide-loop aim against what is reachable at all."""
+    trials = sorted({int(t) for r in reps for t in r["trials"]})
+    sub, numbers = select(load_sequence_set(c["sequences"]), trials, reps[0]["frames"])
+    df = drift_bounds(sub, numbers)
+    save_text(c["out"]["bounds"], csv_text(df.to_dict("records"), BOUNDS_COLUMNS, 4))
+    log.info("drift bounds (held-out motion MAE px): %s -> %s",
+             ", ".join(f"{r.predictor} {r.heldout_mae_px:.3f}" for r in df.itertuples()), c["out"]["bounds"])
 
 
 def _figure(c: dict, chosen: str, reps: list[dict]) -> None:

@@ -59,6 +59,8 @@ SOURCES = {
                              ("twin", "fitted_on", "heldout_slide_mae_px", "vessel_ratio_sim", "vessel_ratio_real",
                               "silicone_ap_crossfit", "silicone_auroc_crossfit", "meat_ap", "meat_auroc",
                               "silicone_pos_share_05", "seeds", "chosen"), "twin_selection"),
+    "drift_bounds": Source("judge/drift_bounds.csv", ("predictor", "uses_heldout_truth", "heldout_mae_px",
+                                                      "change_vs_no_motion"), "twin_selection"),
 }
 
 TITLES = {

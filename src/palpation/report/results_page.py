@@ -177,7 +177,7 @@ def sections(root: Path, k: float = 2.0, link=None) -> dict[str, Section | None]
             t["recipe_crossfit"], t["recipe_ablation"],
             read_json(root / "recipe" / "report" / "recipe_calibration_crossfit.json"),
             link(CROSSFIT_FIGURE) if link is not None and (root / CROSSFIT_FIGURE).exists() else None),
-        "twin_selection": lambda: twin_selection_section(t["twin_selection"], t["loop_slides"]),
+        "twin_selection": lambda: twin_selection_section(t["twin_selection"], t["loop_slides"], t["drift_bounds"]),
     }
     return {key: build[key]() if t[key] is not None else None for key in ORDER}
 
