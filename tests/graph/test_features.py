@@ -52,3 +52,25 @@ def test_rejects_nan(rest):
     clips[0, 0, 3] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         clip_features(clips, rest, topo)
+
+
+def test_remove_common_motion_drops_the_field_translation_and_keeps_local_motion(rest):
+    """The opt-in input transform (recipe field remove_common_motion): a per-frame translation of the whole field
+    changes no feature, a single marker's motion relative to the others stays, `pos` stays raw; off, nothing moves."""
+    topo = clip_topology(spatial_edges(rest), 5)
+    clips = np.random.default_rng(2).normal(rest, 2.0, (2, 5, 127, 2)).astype(np.float32)
+    drift = np.random.default_rng(3).normal(0, 4.0, (2, 5, 1, 2)).astype(np.float32)  # per clip and frame
+    a = clip_features(clips, rest, topo, remove_common_motion=True)
+    b = clip_features(clips + drift, rest, topo, remove_common_motion=True)
+    for field in ("x", "spatial", "temporal"):
+        assert np.allclose(getattr(a, field), getattr(b, field), atol=1e-3)
+    assert np.allclose(b.pos, (clips + drift).reshape(2, 635, 2))  # the vessel map's positions: raw
+    plain = clip_features(clips + drift, rest, topo)
+    assert not np.allclose(plain.x[..., :2], a.x[..., :2], atol=1e-2)  # off: the drift is in the features
+    assert np.array_equal(plain.x, clip_features(clips + drift, rest, topo, remove_common_motion=False).x)
+    # one marker pushed 5 px: its position relative to a neighbour still moves by the full 5 px
+    pushed = clips.copy()
+    pushed[:, :, 40] += (5.0, 0.0)
+    c = clip_features(pushed, rest, topo, remove_common_motion=True)
+    rel = lambda f: f.x[0, 40, :2] - f.x[0, 41, :2]
+    assert np.allclose(rel(c) - rel(a), (5.0, 0.0), atol=1e-3)

@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 
 from palpation.graph.edges import clip_topology, spatial_edges
 from palpation.graph.features import clip_features
@@ -38,3 +39,16 @@ def test_chunks_equal_one_pass_and_dict_round_trip():
     parts = NormStats.from_chunks(halves, "full")
     assert np.allclose(whole.node_std, parts.node_std) and whole.alpha == parts.alpha
     assert NormStats.from_dict(whole.to_dict()) == whole
+
+
+def test_statistics_of_older_checkpoints_load_without_the_input_transform():
+    """remove_common_motion joined NormStats later: a checkpoint's dict without it loads as off; a dict missing a
+    field without a default is still refused."""
+    from palpation.graph.normalise import NormStats
+
+    d = {"node_mean": (0, 0, 0), "node_std": (1, 1, 1), "spatial_mean": (0, 0, 0), "spatial_std": (1, 1, 1),
+         "temporal_mean": (0, 0, 0), "temporal_std": (1, 1, 1), "alpha": 0.9, "n_clips": 4, "mode": "sample"}
+    assert NormStats.from_dict(d).remove_common_motion is False
+    assert NormStats.from_dict({**d, "remove_common_motion": True}).remove_common_motion is True
+    with pytest.raises(ValueError, match="alpha"):
+        NormStats.from_dict({k: v for k, v in d.items() if k != "alpha"})

@@ -70,3 +70,35 @@ def test_progress_bar_on_stderr_only_when_asked_and_results_unchanged(meat, caps
     assert shown.history == quiet.history  # the bar draws no random numbers
     assert all(torch.equal(a, b) for a, b in zip(shown.model.state_dict().values(),
                                                  quiet.model.state_dict().values()))
+
+
+def test_remove_common_motion_travels_with_the_statistics(meat, tmp_path):
+    """The opt-in input transform: fitted with it, the statistics carry it through the checkpoint, so scoring the
+    same clips with a whole-field drift added per frame gives the same scores; without it the scores move."""
+    from dataclasses import replace
+
+    rest, topo, sets = meat
+    on = fit(sets["train"], sets["val"], rest, topo, COMPACT, replace(TINY, remove_common_motion=True), seed=3)
+    assert on.stats.remove_common_motion
+    save_checkpoint(tmp_path / "c.pt", on.model, COMPACT, on.stats, rest)
+    model, stats, _, _ = load_checkpoint(tmp_path / "c.pt")
+    assert stats.remove_common_motion
+
+    class Drifted:  # the val clips with a per-frame translation of every marker (a trial-specific drift)
+        def __init__(self, clips, px):
+            self.clips, self.px = clips, px
+
+        def __len__(self):
+            return len(self.clips)
+
+        def gather(self, idx, *args, **kwargs):
+            m, lab = self.clips.gather(idx, *args, **kwargs)
+            return m + np.random.default_rng(len(idx)).normal(0, self.px, (*m.shape[:2], 1, 2)).astype(m.dtype), lab
+
+    clean = predict(model, sets["val"], stats, rest, topo, 2)[0]
+    drifted = predict(model, Drifted(sets["val"], 10.0), stats, rest, topo, 2)[0]
+    assert np.allclose(drifted, clean, atol=1e-3)  # float32 rounding of the features only
+    off = fit(sets["train"], sets["val"], rest, topo, COMPACT, TINY, seed=3)
+    assert not off.stats.remove_common_motion
+    moved = predict(off.model, Drifted(sets["val"], 10.0), off.stats, rest, topo, 2)[0]
+    assert not np.allclose(moved, predict(off.model, sets["val"], off.stats, rest, topo, 2)[0], atol=1e-3)

@@ -20,14 +20,16 @@ def make_batch(markers: np.ndarray, labels: np.ndarray, rest: np.ndarray, topo: 
                stats: NormStats, device: str | torch.device = "cpu", features: ClipFeatures | None = None) -> Data:
     """markers (B, L, 127, 2) px, labels (B, L, 127) -> normalised batch graph on `device`.
 
-    `features`: clip_features(markers, rest, topo) computed already (models with other statistics
-    scoring the same clips share them).
+    `features`: clip_features(markers, rest, topo, stats.remove_common_motion) computed already (models with
+    other statistics scoring the same clips share them).
 
     Fields: x (B·127L, F) marker features, edge_index (2, E), edge_attr_spatial/temporal/
     global_temporal, num_global (B·L), num_global_spatial (edges), y (B·127L) labels,
     frame (B·127L) frame index, pos (raw px).
     """
-    feats = stats.apply(clip_features(markers, rest, topo) if features is None else features)
+    if features is None:
+        features = clip_features(markers, rest, topo, stats.remove_common_motion)
+    feats = stats.apply(features)
     b = len(markers)
 
     def t(a, dtype=torch.float32):

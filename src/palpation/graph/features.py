@@ -5,6 +5,8 @@ Marker node (137 at L = 5): [x, y] px, rest dist_from_centre, rest unit vector f
 Spatial edge: [dist, dx, dy, dx/dist, dy/dist] with vec = p[dst] - p[src], dist >= 1e-6.
 Temporal edge: the same 5 across frames + direction one-hot (forward [0, 1], backward [1, 0]).
 Global-temporal edge: the direction one-hot. Global nodes and global-spatial edges have none.
+With `remove_common_motion` (an opt-in recipe field, off in every shipped recipe) the features see each frame's
+markers without the whole field's translation (`without_common_motion`); `pos` stays raw.
 """
 
 from __future__ import annotations
@@ -43,13 +45,22 @@ def static_marker_features(rest: np.ndarray) -> np.ndarray:
     return np.concatenate([dist[:, None], unit], axis=1).astype(np.float32)
 
 
+def without_common_motion(markers: np.ndarray, rest: np.ndarray) -> np.ndarray:
+    """Markers (..., 127, 2) px with each frame's mean displacement from the rest sites taken off: the whole
+    field's translation goes (the real slides' trial-specific drift that no twin reproduces, docs/loop.md "What a
+    held-out slide MAE can reach"), every marker's motion relative to the others (the vessel's cue) stays."""
+    markers = np.asarray(markers, np.float32)
+    return markers - (markers - np.asarray(rest, np.float32)).mean(axis=-2, keepdims=True)
+
+
 def _edge_geometry(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     vec = dst - src
     dist = np.maximum(np.linalg.norm(vec, axis=-1, keepdims=True), MIN_DIST)
     return np.concatenate([dist, vec, vec / dist], axis=-1)
 
 
-def clip_features(markers: np.ndarray, rest: np.ndarray, topo: ClipTopology) -> ClipFeatures:
+def clip_features(markers: np.ndarray, rest: np.ndarray, topo: ClipTopology,
+                  remove_common_motion: bool = False) -> ClipFeatures:
     """Features of clips `markers` (B, L, 127, 2) px (or one clip (L, 127, 2)) on topology `topo`."""
     markers = np.asarray(markers, np.float32)
     if markers.ndim == 3:
@@ -60,6 +71,9 @@ def clip_features(markers: np.ndarray, rest: np.ndarray, topo: ClipTopology) -> 
     if not np.all(np.isfinite(markers)):
         raise ValueError("clip markers contain NaN/inf; fill missing markers before building graphs")
     n = N_MARKERS
+    raw = markers.reshape(b, big_l * n, 2)
+    if remove_common_motion:
+        markers = without_common_motion(markers, rest)
     pos = markers.reshape(b, big_l * n, 2)
     static = np.broadcast_to(static_marker_features(rest), (b, big_l, n, 3))
     ids = np.broadcast_to(np.eye(n, dtype=np.float32), (b, big_l, n, n))
@@ -80,4 +94,4 @@ def clip_features(markers: np.ndarray, rest: np.ndarray, topo: ClipTopology) -> 
     gt = np.repeat(np.array([FORWARD, BACKWARD], np.float32), n_gt // 2, axis=0)
     global_temporal = np.broadcast_to(gt, (b, n_gt, 2))
     return ClipFeatures(x.astype(np.float32), spatial.astype(np.float32), temporal.astype(np.float32),
-                        np.ascontiguousarray(global_temporal), pos.astype(np.float32))
+                        np.ascontiguousarray(global_temporal), raw.astype(np.float32))

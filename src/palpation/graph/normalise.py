@@ -31,9 +31,11 @@ class NormStats:
     alpha: float  # N_neg / (N_neg + N_pos) over every marker of every frame of the clips
     n_clips: int
     mode: str
+    remove_common_motion: bool = False  # the features' input transform (graph.features), kept with the statistics
 
     @classmethod
-    def from_chunks(cls, chunks: Iterable[tuple[ClipFeatures, np.ndarray]], mode: str) -> "NormStats":
+    def from_chunks(cls, chunks: Iterable[tuple[ClipFeatures, np.ndarray]], mode: str,
+                    remove_common_motion: bool = False) -> "NormStats":
         """Accumulate statistics over (features, labels (B, L, 127)) chunks in float64.
 
         std is the sample std (ddof 1, as torch's default); a constant column gets std 1.
@@ -60,7 +62,8 @@ class NormStats:
                 std = np.sqrt(np.maximum(var, 0.0))
                 std = np.where(std > 1e-12, std, 1.0)
             out[f"{g}_mean"], out[f"{g}_std"] = tuple(map(float, mean)), tuple(map(float, std))
-        return cls(**out, alpha=(n_all - n_pos) / n_all, n_clips=n_clips, mode=mode)
+        return cls(**out, alpha=(n_all - n_pos) / n_all, n_clips=n_clips, mode=mode,
+                   remove_common_motion=remove_common_motion)
 
     def apply(self, feats: ClipFeatures) -> ClipFeatures:
         """A normalised copy; `pos` stays in raw px for the vessel map."""
@@ -92,7 +95,7 @@ class NormStats:
     @classmethod
     def from_dict(cls, d: dict) -> "NormStats":
         fields = {f.name for f in dataclasses.fields(cls)}
-        missing = fields - set(d)
+        missing = {f.name for f in dataclasses.fields(cls) if f.default is dataclasses.MISSING} - set(d)
         if missing:
             raise ValueError(f"normalisation statistics lack {sorted(missing)}; was the checkpoint "
                              "written by palpation.model.train?")

@@ -75,6 +75,9 @@ class TrainConfig:
     # post-hoc: none | temperature | platt (on the validation split) | cross_real (Platt on the same models' scores on
     # the other real test set scored with them, also_test; never the run's own test set)
     calibration: str = "none"
+    # opt-in input transform, off in every shipped recipe: each frame's whole-field translation taken off the
+    # features (graph.features.without_common_motion; the real slides' drift that no twin reproduces)
+    remove_common_motion: bool = False
     restarts: int = 1  # starts per seed, the best on val kept (palpation.model.restarts); 1 = the seed alone
     threshold: float = 0.5
     device: str = "cpu"
@@ -133,6 +136,7 @@ class RecipeSchema:
     patience: Optional[int] = MISSING
     select_metric: SelectMetric = MISSING
     calibration: Calibration = MISSING
+    remove_common_motion: bool = MISSING
     sizes: Dict[str, SizesSchema] = MISSING
 
 

@@ -258,6 +258,9 @@ def score_stack(stack: Stack, stats: list, clips: ClipSet, rest: np.ndarray, top
                 progress: bool = False) -> list[tuple[np.ndarray, np.ndarray]]:
     """Central-frame scores of the stacked models (eval mode) as `predict` gives them one model at a time;
     the clip features are computed once, each seed normalises them with its own statistics."""
+    if len({st.remove_common_motion for st in stats}) > 1:  # one set of features serves every seed
+        raise ValueError("score_stack: the stacked seeds' statistics disagree on remove_common_motion; "
+                         "stack only runs of one recipe")
     stack.base.eval()
     centre = central_slice(topo.clip_len)
     n = len(clips) if max_batches is None else min(len(clips), max_batches * batch_size)
@@ -265,7 +268,7 @@ def score_stack(stack: Stack, stats: list, clips: ClipSet, rest: np.ndarray, top
     for start in bar(range(0, n, batch_size), desc=f"score {len(stats)} seeds", unit="batch", enabled=progress):
         idx = np.arange(start, min(start + batch_size, n))
         markers, lab = clips.gather(idx)
-        feats = clip_features(markers, rest, topo)
+        feats = clip_features(markers, rest, topo, stats[0].remove_common_motion)
         batches = [make_batch(markers, lab, rest, topo, st, device, features=feats) for st in stats]
         p = torch.sigmoid(stack(batches)).view(len(stats), len(idx), topo.n_markers)[:, :, centre]
         probs.append(p.cpu().numpy().reshape(len(stats), -1))

@@ -82,9 +82,9 @@ def norm_stats(train: ClipSet, rest: np.ndarray, topo: ClipTopology, cfg: TrainC
         for s in range(0, len(idx), NORM_CHUNK):
             m, lab = train.gather(idx[s:s + NORM_CHUNK], rot[s:s + NORM_CHUNK], cfg.rotation == "consistent",
                                   lattice=cfg.rotation == "lattice")
-            yield clip_features(m, rest, topo), lab
+            yield clip_features(m, rest, topo, cfg.remove_common_motion), lab
 
-    return NormStats.from_chunks(chunks(), cfg.norm_stats)
+    return NormStats.from_chunks(chunks(), cfg.norm_stats, cfg.remove_common_motion)
 
 
 def val_fg_iou(probs: np.ndarray, labels: np.ndarray, threshold: float) -> float:
