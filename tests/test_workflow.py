@@ -144,17 +144,22 @@ def test_judge_dag_when_turned_on(tmp_path, default_listing):
     or one per configuration with train.seeds_together), photo_loop's A-to-C (the main sweep's rule), the table."""
     assert "twin_selection" not in job_stats(default_listing)
     extra = tmp_path / "judge.yaml"
-    extra.write_text("judge: {seeds: [0, 1], slide_loop: 'trials=[1,2] frames=[5,7]'}\n")
+    judge = "judge: {seeds: [0, 1], slide_loop: 'trials=[1,2] frames=[5,7]'}\n"
+    photo_main = "dataset: {twin: photo_loop}\n"  # the main Sim set is photo_loop's: the judge reuses its runs
+    extra.write_text(judge + photo_main)
     stats = job_stats(dry_run(tmp_path, "--configfile", str(extra)))
     assert stats["twin_selection"] == 1 and stats["judge_slides"] == 4 and stats["judge_fold_twin"] == 2
     assert stats["judge_dataset"] == 2 and stats["judge_train"] == 3 * 2 * 2 and stats["slide_loop"] == 1
     assert "train_twin_ablation" not in stats and stats["simulate_dataset_calibrated"] == 1
-    extra.write_text("judge: {seeds: [0, 1], slide_loop: 'trials=[1,2] frames=[5,7]'}\ntrain: {seeds_together: true}\n")
+    extra.write_text(judge)  # the quick profile's own pin (calibrated): photo_loop gets a Sim set and runs of its own
+    stats = job_stats(dry_run(tmp_path, "--configfile", str(extra)))
+    assert stats["judge_dataset"] == 3 and stats["judge_train"] == 4 * 2 * 2
+    extra.write_text(judge + photo_main + "train: {seeds_together: true}\n")
     stats = job_stats(dry_run(tmp_path, "--configfile", str(extra)))
     assert stats["judge_train_seeds"] == 3 and "judge_train" not in stats  # 3 twins, A-to-C scored by A-to-B's models
     # judge.recipe other than train.recipe: photo_loop trains in the judge too, every candidate with that recipe
     extra.write_text("judge: {seeds: [0, 1], slide_loop: 'trials=[1,2] frames=[5,7]', recipe: robust}\n"
-                     "train: {seeds_together: true}\n")
+                     "train: {seeds_together: true}\n" + photo_main)
     listing = dry_run(tmp_path, "-p", "--configfile", str(extra))
     stats = job_stats(listing)
     assert stats["judge_train_seeds"] == 4 and "judge_train" not in stats
