@@ -158,24 +158,25 @@ def table(cfg: DictConfig) -> dict:
     if made:
         note += f"The main Sim set's twin: {made['sim_set_twin']} ({made['how']}; config dataset.twin).\n\n"
     save_text(c["out"]["md"], f"# Twin on the task ({c['profile']} profile)\n\n{note}" + markdown(list(COLUMNS), rows))
-    _figure(c, chosen, replays[chosen])
-    _bounds(c, [r for reps in replays.values() for r in reps])
+    sset = load_sequence_set(c["sequences"])  # read once for the figure and the bounds
+    _figure(c, sset, chosen, replays[chosen])
+    _bounds(c, sset, [r for reps in replays.values() for r in reps])
     log.info("twin selection: chosen %s -> %s", chosen, c["out"]["csv"])
     return {"chosen": chosen, "rows": df.to_dict("records")}
 
 
-def _bounds(c: dict, reps: list[dict]) -> None:
+def _bounds(c: dict, sset, reps: list[dict]) -> None:
     """out.bounds: the held-out MAE of predictors that need no twin (loop.slide_diagnosis.drift_bounds) on the
     replays' trials and frames, so the page can read the slide-loop aim against what is reachable at all."""
     trials = sorted({int(t) for r in reps for t in r["trials"]})
-    sub, numbers = select(load_sequence_set(c["sequences"]), trials, reps[0]["frames"])
+    sub, numbers = select(sset, trials, reps[0]["frames"])
     df = drift_bounds(sub, numbers)
     save_text(c["out"]["bounds"], csv_text(df.to_dict("records"), BOUNDS_COLUMNS, 4))
     log.info("drift bounds (held-out motion MAE px): %s -> %s",
              ", ".join(f"{r.predictor} {r.heldout_mae_px:.3f}" for r in df.itertuples()), c["out"]["bounds"])
 
 
-def _figure(c: dict, chosen: str, reps: list[dict]) -> None:
+def _figure(c: dict, sset, chosen: str, reps: list[dict]) -> None:
     from palpation.figures.slide_motion import slide_motion_figure
 
     trial = int(c["figure_trial"]) if c["figure_trial"] is not None else reps[0]["trials"][0]
@@ -185,7 +186,6 @@ def _figure(c: dict, chosen: str, reps: list[dict]) -> None:
                          f"{[r['trials'] for r in reps]}; pick one of them")
     name = chosen if rep["fold"] is None else f"{chosen}_{rep['fold']}"
     sim = read_npz(Path(c["slides"][name]).with_suffix(".npz"), ("markers", "trials"), "rerun rule judge_slides")
-    sset = load_sequence_set(c["sequences"])
     first, end = rep["frames"]
     i = list(sim["trials"]).index(trial)
     slide_motion_figure(sset.markers[trial - 1, first:end], sim["markers"][i], sset.labels[trial - 1, first:end],

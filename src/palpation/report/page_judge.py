@@ -71,7 +71,7 @@ def reachable(df: pd.DataFrame, bounds: pd.DataFrame) -> list[str]:
     b = bounds.set_index("predictor")
     part = lambda names: ", ".join(f"{n.replace('_', ' ')} {b.loc[n, 'heldout_mae_px']:.3f} px "
                                    f"({100 * b.loc[n, 'change_vs_no_motion']:+.1f} %)" for n in names if n in b.index)
-    own = [n for n in b.index if str(b.loc[n, "uses_heldout_truth"]).lower() == "true"]
+    own = [n for n in b.index if _truthy(b.loc[n, "uses_heldout_truth"])]
     shared = [n for n in b.index if n not in own and n != "no_motion"]
     text = (f"What the slide-loop aim asks: a held-out MAE <= {target:.3f} px ({100 * MAE_DROP:.0f} % below "
             f"calibrated's {by['calibrated']:.3f}). Without a twin (`judge/drift_bounds.csv`, against no motion "
