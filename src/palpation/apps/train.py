@@ -24,6 +24,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from palpation.config_check import app_main
 from palpation.model.config import ModelConfig, TrainConfig
+from palpation.model.gpu_slots import shared_cuda
 from palpation.model.job import TrainJob, run_job, run_jobs_together
 
 log = logging.getLogger(__name__)
@@ -77,6 +78,7 @@ def run(cfg: DictConfig, out_dir: str | Path | None = None) -> dict | list[dict]
     if out_dir is None:
         out_dir = HydraConfig.get().runtime.output_dir
     job = job_from_config(cfg)
+    job = replace(job, train=replace(job.train, device=shared_cuda(job.train.device)))  # a free card of several
     params = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
     params.pop("hydra", None)
     params["recipe"].pop("sizes", None)  # the chosen sizes are in train.*
