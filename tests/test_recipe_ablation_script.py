@@ -15,6 +15,7 @@ import yaml
 from palpation.graph.layout import rest_layout
 from palpation.graph.sources import sim_trajectory_files
 from palpation.graph.synthetic import write_meat, write_silicone, write_sim
+from palpation.model.recipe import SWITCHES
 from palpation.paths import REPO_ROOT
 
 SCRIPT = REPO_ROOT / "workflow" / "scripts" / "gpu_recipe_ablation.sh"
@@ -49,6 +50,8 @@ def test_a_part_runs_packs_and_resumes(tmp_path):
 
     bad = script(work, "out", *args, PART="robust_nope")
     assert bad.returncode == 2 and "PART 'robust_nope'" in bad.stderr
+    first = script(work, "out_first", *args, "-n", PART=f"robust_{next(iter(SWITCHES))}")  # refused once: no prefix
+    assert "is not all, reference_none" not in first.stderr, first.stderr
     done = script(work, "out", *args, PART="robust_jitter")
     assert done.returncode == 0, (done.stdout + (work / "out/snakemake.log").read_text())[-3000:]
     assert "4 finished runs" in done.stdout  # 2 seeds x (A-to-B, A-to-C), trained once

@@ -33,7 +33,7 @@ switches=$(python3 -c "from palpation.model.recipe import SWITCHES; print(' '.jo
 targets=()
 for part in ${PART:-all}; do
   if [ "$part" = all ]; then targets+=(results/recipe/report/recipe_ablation.csv)
-  elif [[ " reference_none robust_none ${switches// / robust_} " == *" $part "* ]]; then targets+=("recipe_$part")
+  elif [[ " reference_none robust_none robust_${switches// / robust_} " == *" $part "* ]]; then targets+=("recipe_$part")
   else echo "gpu_recipe_ablation: PART '$part' is not all, reference_none, robust_none or robust_<switch> ($switches)" >&2
     exit 2
   fi
