@@ -8,6 +8,11 @@ initial weights (torch seeded with the seed), the dropout masks (its own RNG sta
 order), the Adam moments (elementwise, so one Adam over stacked tensors is S Adams), early stopping
 and the best-validation checkpoint. Validation and test scoring run the stack too (`score_stack`).
 
+The host stays a step ahead of the card: the seeds' next batches are built (and pinned) on threads while
+the current step runs, and the losses are read back once an epoch instead of once a step (a read-back
+waits for the card). The draws are unchanged: each seed's batches are still built in order from its
+own stream, never across an epoch's end.
+
 How close to separate runs: every draw is the same. Dropout masks are drawn by `F.dropout` itself
 (on ones, so the CPU's `bernoulli_` or CUDA's fused kernel, with the same shapes in the same order)
 from the seed's own copy of the default generator's state, which is where `fit`'s dropouts draw from.
@@ -170,10 +175,17 @@ def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology
     def seed_loss(logits, y, alpha):
         return focal_loss(logits, y, alpha, cfg.focal_gamma)
 
-    def prepare(s: SeedState, order: np.ndarray, b: int) -> None:  # only s's own stream: threads are safe
-        if not s.stopped:
-            m, lab = training_batch(train, order[b * cfg.batch_size:(b + 1) * cfg.batch_size], cfg, s.rng)
-            s.batch = make_batch(m, lab, rest, topo, s.stats, cfg.device)
+    on_gpu = torch.device(cfg.device).type == "cuda"
+
+    def prepare(s: SeedState, order: np.ndarray, b: int):  # only s's own stream: threads are safe
+        if s.stopped:
+            return None
+        m, lab = training_batch(train, order[b * cfg.batch_size:(b + 1) * cfg.batch_size], cfg, s.rng)
+        host = make_batch(m, lab, rest, topo, s.stats, "cpu")
+        return host.pin_memory() if on_gpu else host  # pinned: the copy to the card need not wait for it
+
+    def prepare_all(orders: list, b: int) -> list:
+        return list(pool.map(prepare, states, orders, [b] * len(states)))
 
     opt = torch.optim.Adam(grouped_parameters(stack.params.items(), cfg.weight_decay), lr=cfg.lr)
     sched = torch.optim.lr_scheduler.StepLR(opt, cfg.step_size, cfg.step_gamma) if cfg.schedule == "step" else None
@@ -183,31 +195,42 @@ def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology
         n_batches = min(n_batches, cfg.train_batches)
     steps = bar(total=cfg.epochs * n_batches, desc=f"train {len(seeds)} seeds", unit="batch", enabled=progress)
     step, pool = 0, ThreadPoolExecutor(len(states))  # the seeds' batches are built side by side
+    ahead = ThreadPoolExecutor(1)  # ... one step ahead of the card: batch b + 1 is built while step b runs
     for epoch in range(cfg.epochs):
         stack.base.train()
         orders = [None if s.stopped else s.rng.permutation(len(train)) for s in states]
-        losses = [[] for _ in states]
+        active = torch.tensor([0.0 if s.stopped else 1.0 for s in states], device=cfg.device)  # fixed in an epoch
+        step_losses = []  # (step, the seeds' losses on the device): read back once an epoch, not once a step
+        coming = ahead.submit(prepare_all, orders, 0)
         for b in range(n_batches):
-            list(pool.map(prepare, states, orders, [b] * len(states)))
+            host = coming.result()
+            if b + 1 < n_batches:  # never across epochs: the next epoch's order is drawn after this one's batches
+                coming = ahead.submit(prepare_all, orders, b + 1)
+            for s, h in zip(states, host):
+                if h is not None:
+                    s.batch = h.to(cfg.device, non_blocking=True)
             idle = next(s.batch for s in states if not s.stopped)
             batches = [idle if s.stopped else s.batch for s in states]  # a stopped seed idles, weight 0
             shapes = stack.mask_shapes(batches[0])
             drawn = [_draw_masks(s, shapes, cfg.device) for s in states]
             logits = stack(batches, [torch.stack(per_call) for per_call in zip(*drawn)])
             loss = vmap(seed_loss)(logits, torch.stack([x.y for x in batches]), alphas)
-            active = torch.tensor([0.0 if s.stopped else 1.0 for s in states], device=cfg.device)
             opt.zero_grad()
             (loss * active).sum().backward()  # seeds share no weights: each gets its own gradient
             opt.step()
             step += 1
-            for s, lst, value in zip(states, losses, loss.tolist()):
+            step_losses.append((step, loss.detach()))
+            steps.update()
+        losses = [[] for _ in states]
+        values = torch.stack([v for _, v in step_losses]).tolist() if step_losses else []
+        for (at, _), per_seed in zip(step_losses, values):
+            for s, lst, value in zip(states, losses, per_seed):
                 if not s.stopped:
                     lst.append(value)
-                    s.steps.append(({"train/loss": value}, step))
-            if progress:
-                live = [np.mean(lst) for s, lst in zip(states, losses) if not s.stopped]
-                steps.set_postfix_str(f"epoch {epoch + 1}/{cfg.epochs} loss {np.mean(live):.5f}", refresh=False)
-            steps.update()
+                    s.steps.append(({"train/loss": value}, at))
+        if progress:
+            live = [np.mean(lst) for s, lst in zip(states, losses) if not s.stopped]
+            steps.set_postfix_str(f"epoch {epoch + 1}/{cfg.epochs} loss {np.mean(live):.5f}")
         if sched:
             sched.step()
         scored = score_stack(stack, [s.stats for s in states], val, rest, topo, cfg.batch_size, cfg.val_batches,
@@ -220,6 +243,7 @@ def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology
             break
     steps.close()
     pool.shutdown()
+    ahead.shutdown()
     seconds = time.perf_counter() - start
     results = []
     for s in states:
