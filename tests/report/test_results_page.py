@@ -317,3 +317,14 @@ def test_data_section_names_the_twin_that_made_the_sim_set(tmp_path):
     choice.parent.mkdir(parents=True)
     choice.write_text(json.dumps({"sim_set_twin": "calibrated", "how": "the evidence's choice"}))
     assert "sim: simulated by the `calibrated` twin (the evidence's choice; `judge/choice/choice.json`)." in page(root)
+
+
+def test_timing_record_of_the_same_commit_by_short_hash_is_not_stale(tmp_path):
+    from palpation.report.results_page import timing
+
+    rec = {"commit": "e80d176", "wall_s": 473.7, "per_rule": {"slide_loop": 273.7}}
+    full = "e80d176f4d3c89857ee778c5a75d77c7b69570c0"
+    assert not timing(tmp_path, rec, full)["stale"]
+    assert not timing(tmp_path, {**rec, "commit": full}, full)["stale"]
+    assert timing(tmp_path, {**rec, "commit": "9665dd9"}, full)["stale"]
+    assert timing(tmp_path, {**rec, "commit": ""}, full)["stale"]  # no commit recorded: cannot be the page's

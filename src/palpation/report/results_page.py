@@ -139,8 +139,10 @@ def timing(root: Path, rec: dict | None, built_commit: str) -> dict:
     if rec is None:
         return {"jobs": 0, "record": False}
     per = sorted(rec.get("per_rule", {}).items(), key=lambda kv: -kv[1])
-    return {"jobs": 0, "record": True, "record_commit": rec.get("commit", "unknown"), "wall_s": num(rec["wall_s"], 1),
-            "wall_min": num(rec["wall_s"] / 60, 1), "stale": rec.get("commit") != built_commit,
+    commit = str(rec.get("commit") or "")
+    same = len(commit) >= 7 and str(built_commit or "").startswith(commit)  # a record may carry the short hash
+    return {"jobs": 0, "record": True, "record_commit": commit or "unknown", "wall_s": num(rec["wall_s"], 1),
+            "wall_min": num(rec["wall_s"] / 60, 1), "stale": not same,
             "table": markdown(["rule", "s"], [[k, f"{v:.1f}"] for k, v in per])}
 
 
