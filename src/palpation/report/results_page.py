@@ -140,7 +140,8 @@ def timing(root: Path, rec: dict | None, built_commit: str) -> dict:
         return {"jobs": 0, "record": False}
     per = sorted(rec.get("per_rule", {}).items(), key=lambda kv: -kv[1])
     commit = str(rec.get("commit") or "")
-    same = len(commit) >= 7 and str(built_commit or "").startswith(commit)  # a record may carry the short hash
+    built = str(built_commit or "")
+    same = bool(commit) and (commit == built or (len(commit) >= 7 and built.startswith(commit)))  # or its short hash
     return {"jobs": 0, "record": True, "record_commit": commit or "unknown", "wall_s": num(rec["wall_s"], 1),
             "wall_min": num(rec["wall_s"] / 60, 1), "stale": not same,
             "table": markdown(["rule", "s"], [[k, f"{v:.1f}"] for k, v in per])}
