@@ -53,7 +53,8 @@ def shared_cuda(device: str) -> str:
     n = torch.cuda.device_count()
     if n < 2:
         return device
-    card = claim_slot(n, lock_dir())
+    where = lock_dir()
+    card = claim_slot(n, where)
     torch.cuda.set_device(card)  # where code that says plain `cuda` allocates
-    log.info("device cuda -> cuda:%d (%d GPUs visible; slot locks in %s)", card, n, lock_dir())
+    log.info("device cuda -> cuda:%d (%d GPUs visible; slot locks in %s)", card, n, where)
     return f"cuda:{card}"
