@@ -52,6 +52,11 @@ def test_a_part_runs_packs_and_resumes(tmp_path):
     assert bad.returncode == 2 and "PART 'robust_nope'" in bad.stderr
     first = script(work, "out_first", *args, "-n", PART=f"robust_{next(iter(SWITCHES))}")  # refused once: no prefix
     assert "is not all, reference_none" not in first.stderr, first.stderr
+    # PART= (empty): the files given are the targets, here one configuration's row, not the whole row group's rule
+    one = script(work, "out_one", *args, "-n", "results/recipe/robust/jitter/A-to-B/L5/seed0/metrics.json", PART="")
+    plan = (work / "out_one/snakemake.log").read_text()
+    assert one.returncode == 0 and "train_recipe_seeds_sim_large" in plan, (one.stderr + plan)[-2000:]
+    assert "rule recipe_robust_jitter" not in plan  # (its name is in the echoed command line)
     done = script(work, "out", *args, PART="robust_jitter")
     assert done.returncode == 0, (done.stdout + (work / "out/snakemake.log").read_text())[-3000:]
     assert "4 finished runs" in done.stdout  # 2 seeds x (A-to-B, A-to-C), trained once

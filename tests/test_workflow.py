@@ -241,7 +241,7 @@ def test_every_paper_command_parses_in_bash(tmp_path):
 
 def test_paper_recipe_ablation_plan(tmp_path):
     """The paper profile's recipe ablation (docs/recipe.md, its device-time plan): with train.seeds_together one job
-    per (recipe, switch_off, training set), A-to-B and A-to-C trained once; switch rows for those two only; the
+    per (recipe, switch_off, training set), A-to-B and A-to-C trained once; switch rows for every configuration; the
     results page reads the cross-fitted calibration."""
     listing = dry_run(tmp_path, "-p", "--workflow-profile", str(REPO_ROOT / "workflow/profiles/paper"),
                       "results/recipe/report/recipe_ablation.csv", "results/README.md")
@@ -252,7 +252,8 @@ def test_paper_recipe_ablation_plan(tmp_path):
     assert stats["train_recipe_seeds_sim_large"] == 8  # reference, robust minus each of 7 switches
     # robust, whose job also writes robust minus `calibration` (the same models' raw scores)
     assert stats["train_recipe_robust_sim_large"] == 1
-    assert stats["train_recipe_seeds_meat_compact"] == 2  # C-to-B: the full recipes
+    assert stats["train_recipe_seeds_meat_compact"] == 8  # C-to-B: reference, robust minus each of 7 switches
+    assert stats["train_recipe_robust_meat_compact"] == 1
     assert "train_recipe" not in stats
     sim = [ln for ln in listing.splitlines() if "SNAKEMAKE_RULE=train_recipe_" in ln and "_sim_large" in ln
            and "palpation.apps.train" in ln]

@@ -4,7 +4,8 @@
 # PART (default `all`): `all` makes results/recipe/report/ (every run, then the table, reliability and uncertainty
 #   maps); otherwise row groups of the ablation, e.g. PART="reference_none robust_none" (the full recipes, the aims)
 #   or PART="robust_jitter robust_scale" (target rules recipe_<recipe>_<switch_off>). docs/recipe.md gives the plan:
-#   which parts fit a session, and their estimated device time.
+#   which parts fit a session, and their estimated device time. PART= (set, empty): no target rule; the snakemake
+#   args name the files, e.g. one configuration's rows: results/recipe/robust/rotation/C-to-B/L5/seed0/metrics.json.
 # PROFILE (default paper) picks workflow/profiles/<PROFILE>. Snakemake runs in its own process session (setsid), so
 #   it outlives the command: the device kills a command's processes at its 10-min limit, and one robust Sim job
 #   alone can take longer. LIMIT_S (default: until done) is how long this command waits for it; the same command
@@ -31,7 +32,7 @@ pythonpath=${PYTHONPATH:-}
 export PYTHONPATH="$PWD/src${pythonpath:+:$pythonpath}" PYTHONUNBUFFERED=1
 switches=$(python3 -c "from palpation.model.recipe import SWITCHES; print(' '.join(SWITCHES))") || exit 3
 targets=()
-for part in ${PART:-all}; do
+for part in ${PART-all}; do  # unset: all; set and empty: the snakemake args' targets only
   if [ "$part" = all ]; then targets+=(results/recipe/report/recipe_ablation.csv)
   elif [[ " reference_none robust_none robust_${switches// / robust_} " == *" $part "* ]]; then targets+=("recipe_$part")
   else echo "gpu_recipe_ablation: PART '$part' is not all, reference_none, robust_none or robust_<switch> ($switches)" >&2
