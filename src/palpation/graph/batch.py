@@ -16,6 +16,22 @@ from palpation.graph.features import ClipFeatures, clip_features
 from palpation.graph.normalise import NormStats
 
 
+# the per-batch arrays of a training step, in the dtype the model takes (what batch workers ship, model.batch_workers)
+STEP_FIELDS = ("x", "edge_attr_spatial", "edge_attr_temporal", "edge_attr_global_temporal", "y")
+
+
+def step_arrays(markers: np.ndarray, labels: np.ndarray, rest: np.ndarray, topo: ClipTopology, stats: NormStats,
+                features: ClipFeatures | None = None) -> dict[str, np.ndarray]:
+    """The STEP_FIELDS of make_batch as C-contiguous float32 numpy arrays (no torch: batch workers build these)."""
+    if features is None:
+        features = clip_features(markers, rest, topo, stats.remove_common_motion)
+    feats = stats.apply(features)
+    flat = {"x": feats.x.reshape(-1, feats.x.shape[-1]), "edge_attr_spatial": feats.spatial.reshape(-1, 5),
+            "edge_attr_temporal": feats.temporal.reshape(-1, 7),
+            "edge_attr_global_temporal": feats.global_temporal.reshape(-1, 2), "y": labels.reshape(-1)}
+    return {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in flat.items()}
+
+
 def make_batch(markers: np.ndarray, labels: np.ndarray, rest: np.ndarray, topo: ClipTopology,
                stats: NormStats, device: str | torch.device = "cpu", features: ClipFeatures | None = None) -> Data:
     """markers (B, L, 127, 2) px, labels (B, L, 127) -> normalised batch graph on `device`.
@@ -29,7 +45,6 @@ def make_batch(markers: np.ndarray, labels: np.ndarray, rest: np.ndarray, topo: 
     """
     if features is None:
         features = clip_features(markers, rest, topo, stats.remove_common_motion)
-    feats = stats.apply(features)
     b = len(markers)
 
     def t(a, dtype=torch.float32):
@@ -38,15 +53,11 @@ def make_batch(markers: np.ndarray, labels: np.ndarray, rest: np.ndarray, topo: 
 
     frame = np.repeat(np.arange(topo.clip_len), markers.shape[2])
     return Data(
-        x=t(feats.x.reshape(-1, feats.x.shape[-1])),
+        **{k: t(v) for k, v in step_arrays(markers, labels, rest, topo, stats, features).items()},
         edge_index=t(topo.batched_edge_index(b), torch.long),
-        edge_attr_spatial=t(feats.spatial.reshape(-1, 5)),
-        edge_attr_temporal=t(feats.temporal.reshape(-1, 7)),
-        edge_attr_global_temporal=t(feats.global_temporal.reshape(-1, 2)),
         num_global=b * topo.clip_len,
         num_global_spatial=b * topo.counts["global_spatial"],
-        y=t(labels.reshape(-1)),
         frame=t(np.tile(frame, b), torch.long),
-        pos=t(feats.pos.reshape(-1, 2)),
+        pos=t(features.pos.reshape(-1, 2)),  # raw px: normalising leaves pos alone
         clip_len=topo.clip_len,
     )

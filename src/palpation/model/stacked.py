@@ -37,10 +37,12 @@ import torch
 from torch import nn
 from torch.func import functional_call, stack_module_state, vmap
 
-from palpation.graph.batch import make_batch
+from palpation.graph.batch import make_batch, step_arrays
 from palpation.graph.clips import ClipSet
 from palpation.graph.edges import ClipTopology
 from palpation.graph.features import clip_features
+from palpation.markers.lattice import N_MARKERS
+from palpation.model.batch_workers import SeedFeed, step_shapes
 from palpation.model.config import ModelConfig, TrainConfig
 from palpation.model.evaluate import central_slice
 from palpation.model.stgnn import STGNN
@@ -155,10 +157,13 @@ def _draw_masks(s: SeedState, shapes: list, device: str) -> list[torch.Tensor]:
 
 
 def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology, model_cfg: ModelConfig,
-              cfg: TrainConfig, seeds: list[int], progress: bool = False) -> list[FitResult]:
+              cfg: TrainConfig, seeds: list[int], progress: bool = False,
+              batch_workers: bool | None = None) -> list[FitResult]:
     """`train.fit` for every seed in `seeds`, trained together; one FitResult per seed, in order.
 
-    Each result's `steps` lists the (metrics, step) that `fit` would have logged while training."""
+    Each result's `steps` lists the (metrics, step) that `fit` would have logged while training.
+    batch_workers: build each seed's batches in a process of its own (model.batch_workers; the same draws);
+    None: on a GPU only (on a 2-core CPU the workers would take the cores the training needs)."""
     if len(set(seeds)) != len(seeds) or not seeds:
         raise ValueError(f"seeds must be distinct and at least one, got {seeds}")
     start = time.perf_counter()
@@ -176,74 +181,97 @@ def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology
         return focal_loss(logits, y, alpha, cfg.focal_gamma)
 
     on_gpu = torch.device(cfg.device).type == "cuda"
+    n_batches = -(-len(train) // cfg.batch_size)
+    if cfg.train_batches:
+        n_batches = min(n_batches, cfg.train_batches)
+    if on_gpu if batch_workers is None else batch_workers:  # from here on each seed's stream is its worker's
+        shapes = step_shapes(train, rest, topo, states[0].stats, cfg.batch_size)
+        feeds = [SeedFeed(s.seed, train, rest, topo, s.stats, cfg, s.rng, n_batches, shapes, on_gpu) for s in states]
+    else:
+        feeds = None
 
-    def prepare(s: SeedState, order: np.ndarray, b: int):  # only s's own stream: threads are safe
+    def prepare(i: int, order: np.ndarray, b: int):  # only seed i's own stream: threads are safe
+        s = states[i]
         if s.stopped:
             return None
+        if feeds:
+            return feeds[i].next()
         m, lab = training_batch(train, order[b * cfg.batch_size:(b + 1) * cfg.batch_size], cfg, s.rng)
-        host = make_batch(m, lab, rest, topo, s.stats, "cpu")
-        return host.pin_memory() if on_gpu else host  # pinned: the copy to the card need not wait for it
+        host = {k: torch.from_numpy(v) for k, v in step_arrays(m, lab, rest, topo, s.stats).items()}
+        return {k: v.pin_memory() for k, v in host.items()} if on_gpu else host  # pinned: the copy need not wait
 
     def prepare_all(orders: list, b: int) -> list:
-        return list(pool.map(prepare, states, orders, [b] * len(states)))
+        return list(pool.map(prepare, range(len(states)), orders, [b] * len(states)))
+
+    edge_index = {}  # clips in a batch -> the batch's edges on the device (the same for every seed and step)
+
+    def on_device(host: dict) -> SimpleNamespace:
+        b = len(host["y"]) // (topo.clip_len * N_MARKERS)
+        if b not in edge_index:
+            edge_index[b] = torch.as_tensor(topo.batched_edge_index(b), dtype=torch.long, device=cfg.device)
+        return SimpleNamespace(**{k: v.to(cfg.device, non_blocking=True) for k, v in host.items()},
+                               edge_index=edge_index[b], num_global=b * topo.clip_len,
+                               num_global_spatial=b * topo.counts["global_spatial"])
 
     opt = torch.optim.Adam(grouped_parameters(stack.params.items(), cfg.weight_decay), lr=cfg.lr)
     sched = torch.optim.lr_scheduler.StepLR(opt, cfg.step_size, cfg.step_gamma) if cfg.schedule == "step" else None
     alphas = torch.tensor([s.stats.alpha for s in states], dtype=torch.float32, device=cfg.device)
-    n_batches = -(-len(train) // cfg.batch_size)
-    if cfg.train_batches:
-        n_batches = min(n_batches, cfg.train_batches)
     steps = bar(total=cfg.epochs * n_batches, desc=f"train {len(seeds)} seeds", unit="batch", enabled=progress)
     step, pool = 0, ThreadPoolExecutor(len(states))  # the seeds' batches are built side by side
     ahead = ThreadPoolExecutor(1)  # ... one step ahead of the card: batch b + 1 is built while step b runs
-    for epoch in range(cfg.epochs):
-        stack.base.train()
-        orders = [None if s.stopped else s.rng.permutation(len(train)) for s in states]
-        active = torch.tensor([0.0 if s.stopped else 1.0 for s in states], device=cfg.device)  # fixed in an epoch
-        step_losses = []  # (step, the seeds' losses on the device): read back once an epoch, not once a step
-        coming = ahead.submit(prepare_all, orders, 0)
-        for b in range(n_batches):
-            host = coming.result()
-            if b + 1 < n_batches:  # never across epochs: the next epoch's order is drawn after this one's batches
-                coming = ahead.submit(prepare_all, orders, b + 1)
-            for s, h in zip(states, host):
-                if h is not None:
-                    s.batch = h.to(cfg.device, non_blocking=True)
-            idle = next(s.batch for s in states if not s.stopped)
-            batches = [idle if s.stopped else s.batch for s in states]  # a stopped seed idles, weight 0
-            shapes = stack.mask_shapes(batches[0])
-            drawn = [_draw_masks(s, shapes, cfg.device) for s in states]
-            logits = stack(batches, [torch.stack(per_call) for per_call in zip(*drawn)])
-            loss = vmap(seed_loss)(logits, torch.stack([x.y for x in batches]), alphas)
-            opt.zero_grad()
-            (loss * active).sum().backward()  # seeds share no weights: each gets its own gradient
-            opt.step()
-            step += 1
-            step_losses.append((step, loss.detach()))
-            steps.update()
-        losses = [[] for _ in states]
-        values = torch.stack([v for _, v in step_losses]).tolist() if step_losses else []
-        for (at, _), per_seed in zip(step_losses, values):
-            for s, lst, value in zip(states, losses, per_seed):
+    try:
+        for epoch in range(cfg.epochs):
+            stack.base.train()
+            orders = [None if s.stopped or feeds else s.rng.permutation(len(train)) for s in states]
+            # a stopped seed's loss weighs 0, fixed within an epoch
+            active = torch.tensor([0.0 if s.stopped else 1.0 for s in states], device=cfg.device)
+            step_losses = []  # (step, the seeds' losses on the device): read back once an epoch, not once a step
+            coming = ahead.submit(prepare_all, orders, 0)
+            for b in range(n_batches):
+                host = coming.result()
+                if b + 1 < n_batches:  # not across epochs: the next epoch's order is drawn after this one's batches
+                    coming = ahead.submit(prepare_all, orders, b + 1)
+                for s, h in zip(states, host):
+                    if h is not None:
+                        s.batch = on_device(h)
+                idle = next(s.batch for s in states if not s.stopped)
+                batches = [idle if s.stopped else s.batch for s in states]  # a stopped seed idles, weight 0
+                shapes = stack.mask_shapes(batches[0])
+                drawn = [_draw_masks(s, shapes, cfg.device) for s in states]
+                logits = stack(batches, [torch.stack(per_call) for per_call in zip(*drawn)])
+                loss = vmap(seed_loss)(logits, torch.stack([x.y for x in batches]), alphas)
+                opt.zero_grad()
+                (loss * active).sum().backward()  # seeds share no weights: each gets its own gradient
+                opt.step()
+                step += 1
+                step_losses.append((step, loss.detach()))
+                steps.update()
+            losses = [[] for _ in states]
+            values = torch.stack([v for _, v in step_losses]).tolist() if step_losses else []
+            for (at, _), per_seed in zip(step_losses, values):
+                for s, lst, value in zip(states, losses, per_seed):
+                    if not s.stopped:
+                        lst.append(value)
+                        s.steps.append(({"train/loss": value}, at))
+            if progress:
+                live = [np.mean(lst) for s, lst in zip(states, losses) if not s.stopped]
+                steps.set_postfix_str(f"epoch {epoch + 1}/{cfg.epochs} loss {np.mean(live):.5f}")
+            if sched:
+                sched.step()
+            scored = score_stack(stack, [s.stats for s in states], val, rest, topo, cfg.batch_size, cfg.val_batches,
+                                 cfg.device)
+            stack.base.train()
+            for i, (s, lst) in enumerate(zip(states, losses)):
                 if not s.stopped:
-                    lst.append(value)
-                    s.steps.append(({"train/loss": value}, at))
-        if progress:
-            live = [np.mean(lst) for s, lst in zip(states, losses) if not s.stopped]
-            steps.set_postfix_str(f"epoch {epoch + 1}/{cfg.epochs} loss {np.mean(live):.5f}")
-        if sched:
-            sched.step()
-        scored = score_stack(stack, [s.stats for s in states], val, rest, topo, cfg.batch_size, cfg.val_batches,
-                             cfg.device)
-        stack.base.train()
-        for i, (s, lst) in enumerate(zip(states, losses)):
-            if not s.stopped:
-                _validate(s, i, epoch, lst, step, stack, *scored[i], cfg)
-        if all(s.stopped for s in states):
-            break
-    steps.close()
-    pool.shutdown()
-    ahead.shutdown()
+                    _validate(s, i, epoch, lst, step, stack, *scored[i], cfg)
+            if all(s.stopped for s in states):
+                break
+    finally:  # a failed step (or worker) leaves no worker process behind
+        for feed in feeds or []:
+            feed.close()
+        steps.close()
+        pool.shutdown()
+        ahead.shutdown()
     seconds = time.perf_counter() - start
     results = []
     for s in states:
