@@ -46,7 +46,7 @@ def test_workers_train_exactly_as_the_training_process(meat):
     assert min(len(r.history) for r in runs[0]) < AUGMENTED.epochs  # early stopping is exercised
     for inproc, worker in zip(*runs):  # the same draws in the same order: bit for bit on the CPU
         assert inproc.history == worker.history and inproc.steps == worker.steps
-        assert inproc.best_epoch == worker.best_epoch
+        assert inproc.stats == worker.stats and inproc.best_epoch == worker.best_epoch  # the worker drew the stats
         for (name, a), b in zip(inproc.model.state_dict().items(), worker.model.state_dict().values()):
             assert torch.equal(a, b), name
 

@@ -3,9 +3,9 @@
 On a GPU a stacked step (`model.stacked`) waits for its seeds' batches longer than for the card: one
 batch (gather, augmentation, features, normalisation) is tens of milliseconds of numpy, and threads
 cannot build the seeds' batches side by side under the GIL. A `SeedFeed` forks one worker per seed.
-The worker takes over the seed's numpy stream where `fit_seeds` leaves it (after the normalisation
-clips) and draws exactly what `fit_seeds` would, in the same order: each epoch's permutation, then
-each batch's augmentation. It writes the batch's `STEP_FIELDS` into a ring of shared-memory slots;
+The worker takes the seed's fresh numpy stream and draws exactly what `fit_seeds` would, in the same
+order: the normalisation clips (so the seeds' statistics are computed side by side), then each epoch's
+permutation and each batch's augmentation. It writes the batch's `STEP_FIELDS` into a ring of shared-memory slots;
 the training process copies a slot into pinned memory and hands the slot back.
 
 The worker may run ahead across an epoch's end: a seed's draws do not depend on its training, and the
@@ -27,9 +27,10 @@ import torch
 from palpation.graph.batch import STEP_FIELDS, step_arrays
 from palpation.graph.clips import ClipSet
 from palpation.graph.edges import ClipTopology
+from palpation.graph.features import clip_features
 from palpation.graph.normalise import NormStats
 from palpation.model.config import TrainConfig
-from palpation.model.train import training_batch
+from palpation.model.train import norm_stats, training_batch
 
 SLOTS = 3  # batches a worker may have ready: enough to hide a slow one, little shared memory (3 x ~8 MB)
 POLL_S = 5.0  # how often a waiting training process checks that its worker is still alive
@@ -45,10 +46,13 @@ def _slot_views(buffer: mmap.mmap, shapes: dict) -> dict[str, np.ndarray]:
     return views
 
 
-def _build(train: ClipSet, rest: np.ndarray, topo: ClipTopology, stats: NormStats, cfg: TrainConfig,
-           rng: np.random.Generator, n_batches: int, slots: list, empty, full) -> None:
-    """The worker: epoch after epoch, its seed's batches in `fit_seeds`' draw order, until told to stop."""
+def _build(train: ClipSet, rest: np.ndarray, topo: ClipTopology, cfg: TrainConfig, rng: np.random.Generator,
+           n_batches: int, slots: list, empty, full) -> None:
+    """The worker: its seed's statistics, then epoch after epoch its batches, in `fit_seeds`' draw order, until
+    told to stop."""
     try:
+        stats = norm_stats(train, rest, topo, cfg, rng)
+        full.put(("stats", stats))
         while True:
             order = rng.permutation(len(train))
             for b in range(n_batches):
@@ -66,8 +70,8 @@ def _build(train: ClipSet, rest: np.ndarray, topo: ClipTopology, stats: NormStat
 class SeedFeed:
     """One seed's batch worker and its ring of shared-memory slots; `next()` gives the seed's next batch."""
 
-    def __init__(self, seed: int, train: ClipSet, rest: np.ndarray, topo: ClipTopology, stats: NormStats,
-                 cfg: TrainConfig, rng: np.random.Generator, n_batches: int, shapes: dict, pin: bool):
+    def __init__(self, seed: int, train: ClipSet, rest: np.ndarray, topo: ClipTopology, cfg: TrainConfig,
+                 rng: np.random.Generator, n_batches: int, shapes: dict, pin: bool):
         self.seed, self.pin, self.shapes = seed, pin, shapes
         self.per_clip = {name: shape[0] // cfg.batch_size for name, shape in shapes.items()}
         size = 4 * sum(int(np.prod(s)) for s in shapes.values())
@@ -78,14 +82,13 @@ class SeedFeed:
         for k in range(SLOTS):
             self.empty.put(k)
         self.proc = ctx.Process(target=_build, name=f"batches-seed{seed}", daemon=True,
-                                args=(train, rest, topo, stats, cfg, rng, n_batches, self.slots, self.empty,
-                                      self.full))
+                                args=(train, rest, topo, cfg, rng, n_batches, self.slots, self.empty, self.full))
         with warnings.catch_warnings():  # Python warns on any fork of a threaded process; the child runs numpy only
             warnings.simplefilter("ignore", DeprecationWarning)
             self.proc.start()
 
-    def next(self) -> dict[str, torch.Tensor]:
-        """The seed's next batch: its STEP_FIELDS as CPU tensors (pinned when `pin`), the slot handed back."""
+    def _get(self) -> tuple:
+        """The worker's next message; its error (or silent death) raised here."""
         while True:
             try:
                 got = self.full.get(timeout=POLL_S)
@@ -96,7 +99,18 @@ class SeedFeed:
                                        f"{self.proc.exitcode}) without a word") from None
         if got[0] == "error":
             raise RuntimeError(f"the batch worker of seed {self.seed} failed:\n{got[1]}")
-        slot, n_clips = got
+        return got
+
+    def stats(self) -> NormStats:
+        """The seed's normalisation statistics (the worker's first message; call once, before `next`)."""
+        kind, stats = self._get()
+        if kind != "stats":
+            raise RuntimeError(f"the batch worker of seed {self.seed} sent a batch before its statistics")
+        return stats
+
+    def next(self) -> dict[str, torch.Tensor]:
+        """The seed's next batch: its STEP_FIELDS as CPU tensors (pinned when `pin`), the slot handed back."""
+        slot, n_clips = self._get()
         out = {}
         for name, view in self.slots[slot].items():
             part = torch.from_numpy(view[:n_clips * self.per_clip[name]])
@@ -116,10 +130,12 @@ class SeedFeed:
         self.slots, self.buffers, self.proc = [], [], None  # the maps go with their last view
 
 
-def step_shapes(train: ClipSet, rest: np.ndarray, topo: ClipTopology, stats: NormStats,
-                batch_size: int) -> dict[str, tuple]:
+def step_shapes(train: ClipSet, rest: np.ndarray, topo: ClipTopology, batch_size: int,
+                remove_common_motion: bool) -> dict[str, tuple]:
     """Full-batch shape of every STEP_FIELD, from one unaugmented batch (no draw from any seed's stream)."""
     idx = np.arange(min(batch_size, len(train)))
     m, lab = train.gather(idx)
-    arrays = step_arrays(m, lab, rest, topo, stats)
+    feats = clip_features(m, rest, topo, remove_common_motion)
+    stats = NormStats.from_chunks([(feats, lab)], "full", remove_common_motion)  # any statistics: same shapes
+    arrays = step_arrays(m, lab, rest, topo, stats, feats)
     return {name: (a.shape[0] // len(idx) * batch_size, *a.shape[1:]) for name, a in arrays.items()}

@@ -156,6 +156,35 @@ def _draw_masks(s: SeedState, shapes: list, device: str) -> list[torch.Tensor]:
     return masks
 
 
+def _start_seeds(train: ClipSet, rest: np.ndarray, topo: ClipTopology, model_cfg: ModelConfig, cfg: TrainConfig,
+                 seeds: list[int], n_batches: int, workers: bool) -> tuple[list, list, list]:
+    """Every seed's state and initial model, with its batch worker if `workers`, in `fit`'s draw order: seeding,
+    normalisation clips, initial weights. A worker takes the seed's stream over from the start: it draws the
+    normalisation clips itself (the seeds' statistics in parallel) and then the batches."""
+    shapes = step_shapes(train, rest, topo, cfg.batch_size, cfg.remove_common_motion) if workers else None
+    states, models, feeds = [], [], []
+    try:
+        for seed in seeds:
+            seed_everything(seed)
+            rng = np.random.default_rng(seed)
+            if workers:
+                pin = torch.device(cfg.device).type == "cuda"  # pinned copies: the step need not wait for them
+                feeds.append(SeedFeed(seed, train, rest, topo, cfg, rng, n_batches, shapes, pin))
+                rng, stats = None, None  # the stream is the worker's now; its statistics come below
+            else:
+                stats = norm_stats(train, rest, topo, cfg, rng)
+            models.append(STGNN(topo.clip_len, model_cfg).to(cfg.device))  # torch's stream: numpy drew nothing here
+            # where fit's dropouts start drawing: the CPU generator after the init, the seeded CUDA one
+            states.append(SeedState(seed, rng, stats, _rng_state(cfg.device)))
+        for s, feed in zip(states, feeds):
+            s.stats = feed.stats()
+    except BaseException:
+        for feed in feeds:
+            feed.close()
+        raise
+    return states, models, feeds
+
+
 def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology, model_cfg: ModelConfig,
               cfg: TrainConfig, seeds: list[int], progress: bool = False,
               batch_workers: bool | None = None) -> list[FitResult]:
@@ -167,28 +196,16 @@ def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology
     if len(set(seeds)) != len(seeds) or not seeds:
         raise ValueError(f"seeds must be distinct and at least one, got {seeds}")
     start = time.perf_counter()
-    states, models = [], []
-    for seed in seeds:  # each seed's draws in fit's order: seeding, norm clips, initial weights
-        seed_everything(seed)
-        rng = np.random.default_rng(seed)
-        stats = norm_stats(train, rest, topo, cfg, rng)
-        models.append(STGNN(topo.clip_len, model_cfg).to(cfg.device))
-        # where fit's dropouts start drawing: the CPU generator after the init, the seeded CUDA one
-        states.append(SeedState(seed, rng, stats, _rng_state(cfg.device)))
-    stack = Stack(models)
-
-    def seed_loss(logits, y, alpha):
-        return focal_loss(logits, y, alpha, cfg.focal_gamma)
-
     on_gpu = torch.device(cfg.device).type == "cuda"
     n_batches = -(-len(train) // cfg.batch_size)
     if cfg.train_batches:
         n_batches = min(n_batches, cfg.train_batches)
-    if on_gpu if batch_workers is None else batch_workers:  # from here on each seed's stream is its worker's
-        shapes = step_shapes(train, rest, topo, states[0].stats, cfg.batch_size)
-        feeds = [SeedFeed(s.seed, train, rest, topo, s.stats, cfg, s.rng, n_batches, shapes, on_gpu) for s in states]
-    else:
-        feeds = None
+    states, models, feeds = _start_seeds(train, rest, topo, model_cfg, cfg, seeds, n_batches,
+                                         on_gpu if batch_workers is None else batch_workers)
+    stack = Stack(models)
+
+    def seed_loss(logits, y, alpha):
+        return focal_loss(logits, y, alpha, cfg.focal_gamma)
 
     def prepare(i: int, order: np.ndarray, b: int):  # only seed i's own stream: threads are safe
         s = states[i]
@@ -267,7 +284,7 @@ def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology
             if all(s.stopped for s in states):
                 break
     finally:  # a failed step (or worker) leaves no worker process behind
-        for feed in feeds or []:
+        for feed in feeds:
             feed.close()
         steps.close()
         pool.shutdown()
