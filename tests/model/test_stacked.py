@@ -11,6 +11,7 @@ from palpation.graph.sources import load_dataset
 from palpation.graph.synthetic import write_meat
 from palpation.model import ModelConfig, TrainConfig
 from palpation.model.evaluate import predict
+from palpation.model import stacked
 from palpation.model.stacked import GivenNoise, fit_seeds, predict_seeds
 from palpation.model.train import fit
 
@@ -67,3 +68,18 @@ def test_together_equals_apart_up_to_batched_rounding(meat):
     at_once = predict_seeds([t.model for t in together], [t.stats for t in together], sets["val"], rest, topo, 3)
     for (pa, la), (pt, lt) in zip(alone, at_once):
         assert np.array_equal(la, lt) and np.abs(pa - pt).max() < 1e-6
+
+
+def test_val_batches_kept_between_epochs_score_the_same(meat, monkeypatch):
+    rest, topo, sets = meat
+    runs = fit_seeds(sets["train"], sets["val"], rest, topo, COMPACT, TINY, [3, 4])
+    stack, stats = stacked.Stack([r.model for r in runs]), [r.stats for r in runs]
+    fresh = stacked.score_stack(stack, stats, sets["val"], rest, topo, 3)
+    for budget, kept in ((10 ** 12, -(-len(sets["val"]) // 3)), (1, 0)):
+        monkeypatch.setattr(stacked, "VAL_CACHE_BYTES", budget)
+        cache = {}
+        first = stacked.score_stack(stack, stats, sets["val"], rest, topo, 3, cache=cache)
+        again = stacked.score_stack(stack, stats, sets["val"], rest, topo, 3, cache=cache)  # from the cache
+        assert len(cache) == kept
+        for (pf, lf), (p1, l1), (p2, l2) in zip(fresh, first, again):
+            assert np.array_equal(pf, p1) and np.array_equal(pf, p2) and np.array_equal(lf, l2)
