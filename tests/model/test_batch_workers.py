@@ -1,5 +1,8 @@
 """Batches built in worker processes (model.batch_workers) against batches built in the training process."""
 
+import os
+import queue
+
 import numpy as np
 import pytest
 import torch
@@ -60,3 +63,14 @@ def test_a_failing_worker_is_reported_with_its_traceback(meat, monkeypatch):
     monkeypatch.setattr(batch_workers, "training_batch", broken)  # the forked worker inherits it
     with pytest.raises(RuntimeError, match=r"batch worker of seed 3 failed:(.|\n)*no clips here"):
         fit_seeds(sets["train"], sets["val"], rest, topo, COMPACT, AUGMENTED, [3], batch_workers=True)
+
+
+def test_a_worker_stops_when_its_training_process_is_gone(monkeypatch):
+    parent = os.getpid()
+    empty = queue.Queue()
+    monkeypatch.setattr(batch_workers, "POLL_S", 0.01)
+    monkeypatch.setattr(batch_workers.os, "getppid", lambda: parent)
+    empty.put(2)
+    assert batch_workers._free_slot(empty, parent) == 2
+    monkeypatch.setattr(batch_workers.os, "getppid", lambda: 1)  # re-parented: the training process died
+    assert batch_workers._free_slot(empty, parent) is None

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import mmap
 import multiprocessing as mp
+import os
 import queue
 import traceback
 import warnings
@@ -33,7 +34,7 @@ from palpation.model.config import TrainConfig
 from palpation.model.train import norm_stats, training_batch
 
 SLOTS = 3  # batches a worker may have ready: enough to hide a slow one, little shared memory (3 x ~8 MB)
-POLL_S = 5.0  # how often a waiting training process checks that its worker is still alive
+POLL_S = 5.0  # how often a waiting process checks that the other one is still alive
 
 
 def _slot_views(buffer: mmap.mmap, shapes: dict) -> dict[str, np.ndarray]:
@@ -46,8 +47,19 @@ def _slot_views(buffer: mmap.mmap, shapes: dict) -> dict[str, np.ndarray]:
     return views
 
 
+def _free_slot(empty, parent: int) -> int | None:
+    """The next slot to fill; None when told to stop or when the training process is gone (killed outright, it
+    could not say so, and a worker blocked for ever would outlive it)."""
+    while True:
+        try:
+            return empty.get(timeout=POLL_S)
+        except queue.Empty:
+            if os.getppid() != parent:
+                return None
+
+
 def _build(train: ClipSet, rest: np.ndarray, topo: ClipTopology, cfg: TrainConfig, rng: np.random.Generator,
-           n_batches: int, slots: list, empty, full) -> None:
+           n_batches: int, slots: list, empty, full, parent: int) -> None:
     """The worker: its seed's statistics, then epoch after epoch its batches, in `fit_seeds`' draw order, until
     told to stop."""
     try:
@@ -56,7 +68,7 @@ def _build(train: ClipSet, rest: np.ndarray, topo: ClipTopology, cfg: TrainConfi
         while True:
             order = rng.permutation(len(train))
             for b in range(n_batches):
-                slot = empty.get()
+                slot = _free_slot(empty, parent)
                 if slot is None:
                     return
                 m, lab = training_batch(train, order[b * cfg.batch_size:(b + 1) * cfg.batch_size], cfg, rng)
@@ -82,7 +94,8 @@ class SeedFeed:
         for k in range(SLOTS):
             self.empty.put(k)
         self.proc = ctx.Process(target=_build, name=f"batches-seed{seed}", daemon=True,
-                                args=(train, rest, topo, cfg, rng, n_batches, self.slots, self.empty, self.full))
+                                args=(train, rest, topo, cfg, rng, n_batches, self.slots, self.empty, self.full,
+                                      os.getpid()))
         with warnings.catch_warnings():  # Python warns on any fork of a threaded process; the child runs numpy only
             warnings.simplefilter("ignore", DeprecationWarning)
             self.proc.start()
