@@ -8,11 +8,6 @@ import pytest
 import torch
 
 from palpation.graph.batch import STEP_FIELDS, make_batch, step_arrays
-from palpation.graph.clips import ClipSet
-from palpation.graph.edges import clip_topology, spatial_edges
-from palpation.graph.layout import rest_layout
-from palpation.graph.sources import load_dataset
-from palpation.graph.synthetic import write_meat
 from palpation.model import ModelConfig, TrainConfig
 from palpation.model import batch_workers
 from palpation.model.stacked import fit_seeds
@@ -24,16 +19,8 @@ AUGMENTED = TrainConfig(batch_size=5, epochs=3, train_batches=None, val_batches=
                         jitter_px=0.2, marker_dropout=0.05, displacement_scale=0.2, norm_stats="full")
 
 
-@pytest.fixture(scope="module")
-def meat(tmp_path_factory):
-    rest = rest_layout("ideal")
-    path = write_meat(tmp_path_factory.mktemp("meat") / "meat.npz", rest, n_frames=(8,) * 5, n_val=2)
-    topo = clip_topology(spatial_edges(rest), 2)
-    return rest, topo, {s: ClipSet(load_dataset("meat", path, s), 2, rest) for s in ("train", "val")}
-
-
-def test_step_arrays_are_make_batch_fields(meat):
-    rest, topo, sets = meat
+def test_step_arrays_are_make_batch_fields(meat_l2):
+    rest, topo, sets = meat_l2
     stats = norm_stats(sets["train"], rest, topo, AUGMENTED, np.random.default_rng(0))
     m, lab = sets["train"].gather(np.arange(3))
     data, arrays = make_batch(m, lab, rest, topo, stats), step_arrays(m, lab, rest, topo, stats)
@@ -41,8 +28,8 @@ def test_step_arrays_are_make_batch_fields(meat):
         assert arrays[name].dtype == np.float32 and torch.equal(torch.from_numpy(arrays[name]), getattr(data, name))
 
 
-def test_workers_train_exactly_as_the_training_process(meat):
-    rest, topo, sets = meat
+def test_workers_train_exactly_as_the_training_process(meat_l2):
+    rest, topo, sets = meat_l2
     assert len(sets["train"]) % AUGMENTED.batch_size  # the short last batch is exercised
     runs = [fit_seeds(sets["train"], sets["val"], rest, topo, COMPACT, AUGMENTED, [3, 4, 5], batch_workers=w)
             for w in (False, True)]
@@ -54,8 +41,8 @@ def test_workers_train_exactly_as_the_training_process(meat):
             assert torch.equal(a, b), name
 
 
-def test_a_failing_worker_is_reported_with_its_traceback(meat, monkeypatch):
-    rest, topo, sets = meat
+def test_a_failing_worker_is_reported_with_its_traceback(meat_l2, monkeypatch):
+    rest, topo, sets = meat_l2
 
     def broken(*args):
         raise ValueError("no clips here")

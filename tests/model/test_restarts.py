@@ -6,11 +6,6 @@ from dataclasses import replace
 import pytest
 import torch
 
-from palpation.graph.clips import ClipSet
-from palpation.graph.edges import clip_topology, spatial_edges
-from palpation.graph.layout import rest_layout
-from palpation.graph.sources import load_dataset
-from palpation.graph.synthetic import write_meat
 from palpation.model import ModelConfig, TrainConfig
 from palpation.model.restarts import STRIDE, best_start, fit_restarts, fit_seeds_restarts, start_seeds
 from palpation.model.train import FitResult, fit
@@ -33,16 +28,8 @@ def test_start_seeds_and_the_choice_rule():
         TrainConfig(restarts=0)
 
 
-@pytest.fixture(scope="module")
-def meat(tmp_path_factory):
-    rest = rest_layout("ideal")
-    path = write_meat(tmp_path_factory.mktemp("meat") / "meat.npz", rest, n_frames=(8,) * 5, n_val=2)
-    topo = clip_topology(spatial_edges(rest), 2)
-    return rest, topo, {s: ClipSet(load_dataset("meat", path, s), 2, rest) for s in ("train", "val")}
-
-
-def test_the_kept_start_is_the_best_on_val_and_is_that_seeds_own_model(meat):
-    rest, topo, sets = meat
+def test_the_kept_start_is_the_best_on_val_and_is_that_seeds_own_model(meat_l2):
+    rest, topo, sets = meat_l2
     seed, cfg = 2, replace(TINY, restarts=3)
     alone = [fit(sets["train"], sets["val"], rest, topo, COMPACT, TINY, s) for s in start_seeds(seed, 3)]
     logged = []
@@ -58,8 +45,8 @@ def test_the_kept_start_is_the_best_on_val_and_is_that_seeds_own_model(meat):
     assert none == {} and one.best_val_score == alone[0].best_val_score
 
 
-def test_stacked_restarts_keep_the_same_starts(meat):
-    rest, topo, sets = meat
+def test_stacked_restarts_keep_the_same_starts(meat_l2):
+    rest, topo, sets = meat_l2
     cfg = replace(TINY, restarts=2)
     apart = [fit_restarts(sets["train"], sets["val"], rest, topo, COMPACT, cfg, s) for s in (0, 1)]
     together, extras = fit_seeds_restarts(sets["train"], sets["val"], rest, topo, COMPACT, cfg, [0, 1])

@@ -4,11 +4,6 @@ import numpy as np
 import pytest
 import torch
 
-from palpation.graph.clips import ClipSet
-from palpation.graph.edges import clip_topology, spatial_edges
-from palpation.graph.layout import rest_layout
-from palpation.graph.sources import load_dataset
-from palpation.graph.synthetic import write_meat
 from palpation.model import ModelConfig, TrainConfig
 from palpation.model.evaluate import predict
 from palpation.model import stacked
@@ -34,16 +29,8 @@ def test_seeds_must_be_distinct():
         fit_seeds(None, None, None, None, None, TINY, [1, 1])
 
 
-@pytest.fixture(scope="module")
-def meat(tmp_path_factory):
-    rest = rest_layout("ideal")
-    path = write_meat(tmp_path_factory.mktemp("meat") / "meat.npz", rest, n_frames=(8,) * 5, n_val=2)
-    topo = clip_topology(spatial_edges(rest), 2)  # 2 frames: temporal edges, half the nodes of 3
-    return rest, topo, {s: ClipSet(load_dataset("meat", path, s), 2, rest) for s in ("train", "val")}
-
-
-def test_together_equals_apart_up_to_batched_rounding(meat):
-    rest, topo, sets = meat
+def test_together_equals_apart_up_to_batched_rounding(meat_l2):
+    rest, topo, sets = meat_l2
     seeds = [3, 4]
     apart = [fit(sets["train"], sets["val"], rest, topo, COMPACT, TINY, seed=s) for s in seeds]
     together = fit_seeds(sets["train"], sets["val"], rest, topo, COMPACT, TINY, seeds)
@@ -70,8 +57,8 @@ def test_together_equals_apart_up_to_batched_rounding(meat):
         assert np.array_equal(la, lt) and np.abs(pa - pt).max() < 1e-6
 
 
-def test_val_batches_kept_between_epochs_score_the_same(meat, monkeypatch):
-    rest, topo, sets = meat
+def test_val_batches_kept_between_epochs_score_the_same(meat_l2, monkeypatch):
+    rest, topo, sets = meat_l2
     runs = fit_seeds(sets["train"], sets["val"], rest, topo, COMPACT, TINY, [3, 4])
     stack, stats = stacked.Stack([r.model for r in runs]), [r.stats for r in runs]
     fresh = stacked.score_stack(stack, stats, sets["val"], rest, topo, 3)
