@@ -32,6 +32,11 @@ def step_arrays(markers: np.ndarray, labels: np.ndarray, rest: np.ndarray, topo:
     return {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in flat.items()}
 
 
+def global_counts(topo: ClipTopology, n_clips: int) -> dict[str, int]:
+    """Global nodes and global-spatial edges of a batch of `n_clips` clips (the model's split of its rows)."""
+    return {"num_global": n_clips * topo.clip_len, "num_global_spatial": n_clips * topo.counts["global_spatial"]}
+
+
 def make_batch(markers: np.ndarray, labels: np.ndarray, rest: np.ndarray, topo: ClipTopology,
                stats: NormStats, device: str | torch.device = "cpu", features: ClipFeatures | None = None) -> Data:
     """markers (B, L, 127, 2) px, labels (B, L, 127) -> normalised batch graph on `device`.
@@ -55,8 +60,7 @@ def make_batch(markers: np.ndarray, labels: np.ndarray, rest: np.ndarray, topo: 
     return Data(
         **{k: t(v) for k, v in step_arrays(markers, labels, rest, topo, stats, features).items()},
         edge_index=t(topo.batched_edge_index(b), torch.long),
-        num_global=b * topo.clip_len,
-        num_global_spatial=b * topo.counts["global_spatial"],
+        **global_counts(topo, b),
         frame=t(np.tile(frame, b), torch.long),
         pos=t(features.pos.reshape(-1, 2)),  # raw px: normalising leaves pos alone
         clip_len=topo.clip_len,

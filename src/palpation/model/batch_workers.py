@@ -84,7 +84,7 @@ class SeedFeed:
 
     def __init__(self, seed: int, train: ClipSet, rest: np.ndarray, topo: ClipTopology, cfg: TrainConfig,
                  rng: np.random.Generator, n_batches: int, shapes: dict, pin: bool):
-        self.seed, self.pin, self.shapes = seed, pin, shapes
+        self.seed, self.pin = seed, pin
         self.per_clip = {name: shape[0] // cfg.batch_size for name, shape in shapes.items()}
         size = 4 * sum(int(np.prod(s)) for s in shapes.values())
         self.buffers = [mmap.mmap(-1, size) for _ in range(SLOTS)]  # anonymous and shared: the fork sees them

@@ -37,11 +37,10 @@ import torch
 from torch import nn
 from torch.func import functional_call, stack_module_state, vmap
 
-from palpation.graph.batch import make_batch, step_arrays
+from palpation.graph.batch import STEP_FIELDS, global_counts, make_batch, step_arrays
 from palpation.graph.clips import ClipSet
 from palpation.graph.edges import ClipTopology
 from palpation.graph.features import clip_features
-from palpation.markers.lattice import N_MARKERS
 from palpation.model.batch_workers import SeedFeed, step_shapes
 from palpation.model.config import ModelConfig, TrainConfig
 from palpation.model.evaluate import central_slice
@@ -51,7 +50,6 @@ from palpation.model.train import (FitResult, epoch_row, focal_loss, grouped_par
 from palpation.progress import bar
 
 log = logging.getLogger(__name__)
-GRAPH_FIELDS = ("x", "edge_attr_spatial", "edge_attr_temporal", "edge_attr_global_temporal", "y")
 # validation batches kept between epochs, per job (the paper profile's robust Sim job: 43 batches x 5 seeds, ~1.9 GB)
 VAL_CACHE_BYTES = 2 * 1024 ** 3
 
@@ -124,7 +122,7 @@ class Stack:
             self.base.eval()  # the probe must not update running statistics
             with torch.no_grad():
                 self._one({k: v[0] for k, v in self.params.items()}, {k: v[0] for k, v in self.buffers.items()},
-                          *(getattr(like, f) for f in GRAPH_FIELDS[:-1]), [], like)
+                          *(getattr(like, f) for f in STEP_FIELDS[:-1]), [], like)
             self.shapes[key], self.feed["record"] = self.feed["record"], None
             self.base.train(training)
         return self.shapes[key]
@@ -134,7 +132,7 @@ class Stack:
         like = batches[0]
         if any(b.x.shape != like.x.shape for b in batches):
             raise ValueError("seeds run together need batches of one size (same split and batch_size)")
-        fields = [torch.stack([getattr(b, f) for b in batches]) for f in GRAPH_FIELDS[:-1]]
+        fields = [torch.stack([getattr(b, f) for b in batches]) for f in STEP_FIELDS[:-1]]
         return vmap(partial(self._one, like=like), randomness="error")(self.params, self.buffers, *fields,
                                                                       masks or [])
 
@@ -226,12 +224,11 @@ def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology
     val_batches = {}  # the seeds' val batches: the same every epoch (score_stack's cache)
 
     def on_device(host: dict) -> SimpleNamespace:
-        b = len(host["y"]) // (topo.clip_len * N_MARKERS)
+        b = len(host["y"]) // topo.n_markers  # marker nodes per clip
         if b not in edge_index:
             edge_index[b] = torch.as_tensor(topo.batched_edge_index(b), dtype=torch.long, device=cfg.device)
         return SimpleNamespace(**{k: v.to(cfg.device, non_blocking=True) for k, v in host.items()},
-                               edge_index=edge_index[b], num_global=b * topo.clip_len,
-                               num_global_spatial=b * topo.counts["global_spatial"])
+                               edge_index=edge_index[b], **global_counts(topo, b))
 
     opt = torch.optim.Adam(grouped_parameters(stack.params.items(), cfg.weight_decay), lr=cfg.lr)
     sched = torch.optim.lr_scheduler.StepLR(opt, cfg.step_size, cfg.step_gamma) if cfg.schedule == "step" else None
