@@ -32,5 +32,5 @@ def test_the_loop_command_composes_to_a_layered_auto_twin(monkeypatch):
     gpu = type("Gpu", (), {"is_cuda": True, "max_shared_memory_per_block": 232_448})()  # an H100's
     monkeypatch.setattr("palpation.twin.resident.wp.get_device", lambda device=None: gpu)
     need = np.ones(3435, bool)  # the reference mesh's nodes (their force flags only size the tiles)
-    # resident from the measured crossover (auto_min_envs 40); the paper loop's calls (~15 envs) stay streamed
-    assert runs_resident(tw, need, "cuda", 40) and not runs_resident(tw, need, "cuda", 16)
+    # resident from auto_min_envs (100); the paper loop's calls (~15 envs) stay streamed
+    assert runs_resident(tw, need, "cuda", 100) and not runs_resident(tw, need, "cuda", 16)

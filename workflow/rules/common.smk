@@ -56,7 +56,8 @@ PY = "python -m" if _CONDA else f"{sys.executable} -m"
 PHOTOS = "data/reference/photos/flat-tip"
 VIDEOS = "data/reference/videos"
 GPU = 1 if config["device"] == "cuda" else 0  # resources: gpu, so that a profile can cap GPU jobs
-TWIN_ARGS = f"twin/mesh={config['twin_resolution']} twin.device={config['device']}"
+TWIN_ARGS = f"twin/mesh={config['twin_resolution']} twin.device={config['device']}" + (
+    f" twin.integrator.kernel={config['twin_kernel']}" if config["twin_kernel"] != "streamed" else "")
 
 TRAIN = config["train"]
 EXPERIMENTS = experiments()  # conf/experiment/<name>.yaml: sets trained and tested on, model size
@@ -249,12 +250,15 @@ def dataset_fit(wildcards=None):
 
 
 def candidate_sim_sets(wildcards=None):
-    """With dataset.twin auto: the candidates' Sim sets that this run makes anyway (calibrated: the twin ablation's;
-    photo_loop: its own, judge.smk), so that simulate_dataset copies the chosen one's instead of simulating the same
-    draws again (the app compares request keys: draws, twin, mesh; another twin's set is left alone)."""
+    """With dataset.twin auto: the calibrated candidate's Sim set, which the twin ablation makes anyway right after
+    calibrate, so that simulate_dataset copies it when twin_choice chooses calibrated instead of simulating the same
+    draws again (the app compares request keys: draws, twin, mesh; another twin's set is left alone). photo_loop's
+    set comes last (after the photo loop and its own simulation): waiting for it held the main set back ~30 s after
+    the choice on the paper profile (device run of e80d176), so a chosen photo_loop twin simulates its draws again
+    (the same records: the GPU gather is bit-deterministic)."""
     if DATASET_TWIN != "auto" or not (TWIN_ABL["seeds"] or JUDGE["seeds"]):
         return []
-    return [rules.simulate_dataset_calibrated.output.manifest] + ([PHOTO_SIM] if JUDGE_OWN_PHOTO else [])
+    return [rules.simulate_dataset_calibrated.output.manifest]
 
 
 def judge_runs_root(twin):

@@ -64,8 +64,13 @@ class Replayer:
             mesh = SensorMesh.load(self.mesh_path) if self.mesh_path else cached_sensor_mesh(self.twin.mesh.resolution)
             self._built = (mesh, bind_markers(mesh.nodes, mesh.dome_nodes, self.sset.rest), make_scene(self.sset))
         mesh, binding, scene = self._built
-        return replay(mesh, self.twin, binding, part, scene, candidates, device=self.twin.device,
-                      lead_in_mm=self.lead_in_mm)
+        start = time.perf_counter()
+        out = replay(mesh, self.twin, binding, part, scene, candidates, device=self.twin.device,
+                     lead_in_mm=self.lead_in_mm)
+        # the loop's cost is its twin calls: their sizes and times say what a faster kernel or a larger batch buys
+        log.info("replay: %d candidate(s) x %d trial(s) = %d envs in %.2f s", len(candidates), part.n_trials,
+                 len(candidates) * part.n_trials, time.perf_counter() - start)
+        return out
 
 
 def run(cfg: DictConfig) -> dict:

@@ -285,6 +285,12 @@ def run_fold(evaluate: Evaluate, fit: SequenceSet, held: SequenceSet, settings: 
     return rows, params, tries
 
 
+def _log_to_stderr(level: int) -> None:
+    """A spawned fold worker has no logging set up (Hydra configured the parent only): its rounds and twin calls go to
+    the stderr it shares with the parent, which the workflow's log captures."""
+    logging.basicConfig(level=level, format="[%(asctime)s][%(name)s][%(levelname)s] - %(message)s")
+
+
 def run_slide_loop(evaluate: Evaluate, sset: SequenceSet, settings: SlideLoopSettings, trial_numbers: list[int],
                    workers: int = 1) -> dict:
     """Both folds: rows (COLUMNS), per-fold parameters per round, and the folds' trial numbers. The folds share
@@ -293,7 +299,9 @@ def run_slide_loop(evaluate: Evaluate, sset: SequenceSet, settings: SlideLoopSet
     folds = trial_folds(trial_numbers)
     jobs = [(evaluate, sset.subset(idx), sset.subset(folds[other(fold)]), settings, fold) for fold, idx in folds.items()]
     if workers > 1:
-        with ProcessPoolExecutor(min(workers, len(jobs)), mp_context=multiprocessing.get_context("spawn")) as pool:
+        level = logging.getLogger().getEffectiveLevel()
+        with ProcessPoolExecutor(min(workers, len(jobs)), mp_context=multiprocessing.get_context("spawn"),
+                                 initializer=_log_to_stderr, initargs=(level,)) as pool:
             parts = list(pool.map(run_fold, *zip(*jobs)))
     else:
         parts = [run_fold(*job) for job in jobs]

@@ -79,8 +79,10 @@ class IntegratorConfig:
     # (always streamed on the CPU: the same bits as "streamed"; resident.runs_resident)
     kernel: str = "streamed"
     # "auto" runs the streamed kernels for batches of fewer envs: a resident env is one block on one SM whatever the
-    # batch, so few envs leave most SMs idle. 40: the measured crossover of the layered kernels on an H100 (docs/twin.md)
-    auto_min_envs: int = 40
+    # batch, so few envs leave most SMs idle. The crossover depends on the scene (H100, docs/twin.md): 40 envs for a
+    # press off the phantom, above 60 for the slide loop's replays in contact (no gain at 50-60); 100 keeps every
+    # measured case on its faster side (a Sim set's 500: resident, 3.3x; the loops' calls of 5-60: streamed)
+    auto_min_envs: int = 100
     # threads per env block of the resident kernel (<= 512: 106 registers a thread; compact <= 384, two blocks an SM).
     # 320 with compact: the fastest point of the H200 variant run, 12.63 s for 500 reference envs (docs/twin.md)
     block_dim: int = 320
