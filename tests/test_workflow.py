@@ -227,12 +227,19 @@ def test_sim_set_twin_follows_the_choice(tmp_path):
     assert "at key 'dataset.twin'" in line and "workflow/schemas/config.schema.yaml" in line
 
 
-def test_every_paper_command_parses_in_bash(tmp_path):
+def test_every_paper_command_parses_in_bash(tmp_path, default_listing):
     """Each shell command of the paper profile's whole DAG is valid bash (a quote inside a logged parameter once broke
-    simulate_dataset_calibrated on the device, rc 2 and an empty log, where no CPU profile ran it)."""
+    simulate_dataset_calibrated on the device, rc 2 and an empty log, where no CPU profile ran it). Its twin rules get
+    the profile's twin_kernel (auto: the Sim sets resident; the quick profile keeps the streamed default), and the main
+    Sim set reuses the calibrated candidate's set only (photo_loop's would hold it back)."""
     listing = dry_run(tmp_path, "-p", "--workflow-profile", str(REPO_ROOT / "workflow/profiles/paper"))
     commands = [ln.split("Shell command: ", 1)[1] for ln in listing.splitlines() if ln.startswith("Shell command: ")]
     assert len(commands) > 20 and any("simulate_dataset_calibrated" in c for c in commands)
+    twin_rules = [c for c in commands if "twin.device=cuda" in c]
+    assert len(twin_rules) > 10 and all("twin.integrator.kernel=auto" in c for c in twin_rules)
+    assert "twin.integrator.kernel" not in default_listing
+    main_set = next(c for c in commands if "SNAKEMAKE_RULE=simulate_dataset " in c)
+    assert "'reuse=[results/sim/dataset_calibrated/manifest.json]'" in main_set
     for cmd in commands:
         if cmd != "None":
             check = subprocess.run(["bash", "-n", "-c", cmd], capture_output=True, text=True)

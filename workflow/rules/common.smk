@@ -255,7 +255,7 @@ def candidate_sim_sets(wildcards=None):
     draws again (the app compares request keys: draws, twin, mesh; another twin's set is left alone). photo_loop's
     set comes last (after the photo loop and its own simulation): waiting for it held the main set back ~30 s after
     the choice on the paper profile (device run of e80d176), so a chosen photo_loop twin simulates its draws again
-    (the same records: the GPU gather is bit-deterministic)."""
+    (the same records: neither the streamed gather nor the default resident variant, compact, adds floats atomically)."""
     if DATASET_TWIN != "auto" or not (TWIN_ABL["seeds"] or JUDGE["seeds"]):
         return []
     return [rules.simulate_dataset_calibrated.output.manifest]
