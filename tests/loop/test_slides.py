@@ -196,8 +196,8 @@ def test_motion_decomposition_separates_common_translation_and_affine_motion():
 
 
 def test_folds_side_by_side_give_the_same_loop():
-    """fold_workers 2 (two spawned processes, the app's picklable Replayer with the real twin) = one fold after the
-    other, row for row and parameter for parameter, on the CPU."""
+    """fold_workers 2 (two spawned processes, the app's picklable Replayer with the real twin) and batch_folds (the
+    folds' twin calls as one batch) = one fold after the other, row for row and parameter for parameter, on the CPU."""
     import json
 
     from palpation.apps.slide_loop import Replayer
@@ -209,5 +209,33 @@ def test_folds_side_by_side_give_the_same_loop():
     replayer = Replayer(TwinConfig(), None, s, 0.0)
     apart, together = (run_slide_loop(replayer, s, settings, [1, 2], workers=w) for w in (1, 2))
     assert json.dumps(apart, sort_keys=True, default=str) == json.dumps(together, sort_keys=True, default=str)
+    batched = run_slide_loop(replayer, s, settings, [1, 2], batch_folds=True)
+    assert json.dumps(apart, sort_keys=True, default=str) == json.dumps(batched, sort_keys=True, default=str)
     assert [(r["fold"], r["effect_added"]) for r in together["rows"]] == [
         ("odd", "none"), ("odd", "compliant_phantom"), ("even", "none"), ("even", "compliant_phantom")]
+
+
+def test_fold_batches_run_each_call_once_and_fail_loudly():
+    """loop.fold_batches: the folds' calls wait for each other and run as one `many` call (a fold that has finished no
+    longer holds the other back); an error in the shared call reaches every fold instead of leaving one waiting."""
+    from palpation.loop.fold_batches import run_folds_together
+
+    seen = []
+
+    def many(jobs):
+        seen.append([len(c) for _, c in jobs])
+        return [[c * 10 for c in cands] for _, cands in jobs]
+
+    def fold(evaluate, n_calls, size):
+        return [evaluate(None, list(range(size))) for _ in range(n_calls)]
+
+    out = run_folds_together(fold, [(None, 3, 2), (None, 1, 5)], many)
+    assert out == [[[0, 10]] * 3, [[0, 10, 20, 30, 40]]]
+    assert sorted(seen[0]) == [2, 5] and seen[1:] == [[2], [2]]
+
+    def broken(jobs):
+        raise ValueError("twin diverged")
+
+    with pytest.raises(RuntimeError, match="shared twin call") as err:
+        run_folds_together(fold, [(None, 1, 2), (None, 1, 2)], broken)
+    assert isinstance(err.value.__cause__, ValueError)

@@ -21,7 +21,7 @@ from palpation.config_check import app_main
 from palpation.io import csv_text, save_json, save_text
 from palpation.loop.slide_gate import GateSettings
 from palpation.loop.slide_loop import COLUMNS, SearchSettings, SlideLoopSettings, run_slide_loop
-from palpation.loop.slides import frame_mae, frame_mae_abs, make_scene, replay
+from palpation.loop.slides import frame_mae, frame_mae_abs, make_scene, replay_many
 from palpation.measured_sequences import SequenceSet, load_sequence_set
 from palpation.twin.config import TwinConfig
 from palpation.twin.markers import bind_markers
@@ -60,16 +60,19 @@ class Replayer:
         return {**self.__dict__, "_built": None}
 
     def __call__(self, part: SequenceSet, candidates: list[dict]):
+        return self.many([(part, candidates)])[0]
+
+    def many(self, jobs: list[tuple[SequenceSet, list[dict]]]):
+        """Several (trials, candidates) replays in one twin batch (the folds' calls with `batch_folds`)."""
         if self._built is None:
             mesh = SensorMesh.load(self.mesh_path) if self.mesh_path else cached_sensor_mesh(self.twin.mesh.resolution)
             self._built = (mesh, bind_markers(mesh.nodes, mesh.dome_nodes, self.sset.rest), make_scene(self.sset))
         mesh, binding, scene = self._built
         start = time.perf_counter()
-        out = replay(mesh, self.twin, binding, part, scene, candidates, device=self.twin.device,
-                     lead_in_mm=self.lead_in_mm)
+        out = replay_many(mesh, self.twin, binding, jobs, scene, device=self.twin.device, lead_in_mm=self.lead_in_mm)
         # the loop's cost is its twin calls: their sizes and times say what a faster kernel or a larger batch buys
-        log.info("replay: %d candidate(s) x %d trial(s) = %d envs in %.2f s", len(candidates), part.n_trials,
-                 len(candidates) * part.n_trials, time.perf_counter() - start)
+        log.info("replay: %s envs (candidates x trials) in %.2f s",
+                 " + ".join(f"{len(c)} x {p.n_trials}" for p, c in jobs), time.perf_counter() - start)
         return out
 
 
@@ -89,8 +92,12 @@ def run(cfg: DictConfig) -> dict:
     workers = int(cfg.fold_workers)
     if workers not in (1, 2):
         raise ValueError(f"conf/slide_loop.yaml: fold_workers = {workers}; use 1 (folds in turn) or 2 (side by side)")
+    if cfg.batch_folds and workers != 1:
+        raise ValueError("conf/slide_loop.yaml: batch_folds runs both folds in this process (their twin calls as one "
+                         "batch); set fold_workers=1 with it")
     start = time.perf_counter()
-    result = run_slide_loop(Replayer(twin, cfg.mesh, sset, lead_in), sub, settings, numbers, workers)
+    result = run_slide_loop(Replayer(twin, cfg.mesh, sset, lead_in), sub, settings, numbers, workers,
+                            batch_folds=bool(cfg.batch_folds))
     # the floor a twin must beat: no motion at all (every frame predicted as the rest template)
     still = np.broadcast_to(sub.rest, sub.markers.shape).astype(np.float64)
     for key, fn in (("static_mae_px", frame_mae), ("static_mae_abs_px", frame_mae_abs)):

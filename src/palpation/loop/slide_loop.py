@@ -27,6 +27,7 @@ from typing import Callable
 import numpy as np
 import optuna
 
+from palpation.loop.fold_batches import run_folds_together
 from palpation.loop.folds import other, trial_folds
 from palpation.loop.slide_gate import GateSettings, inner_splits, verdict
 from palpation.loop.slides import SCENE_PARAMETERS, SCHEDULE_KEYS, frame_mae, frame_mae_abs, slide_modes, vessel_ratio
@@ -292,13 +293,16 @@ def _log_to_stderr(level: int) -> None:
 
 
 def run_slide_loop(evaluate: Evaluate, sset: SequenceSet, settings: SlideLoopSettings, trial_numbers: list[int],
-                   workers: int = 1) -> dict:
+                   workers: int = 1, batch_folds: bool = False) -> dict:
     """Both folds: rows (COLUMNS), per-fold parameters per round, and the folds' trial numbers. The folds share
     nothing, so `workers` 2 runs them in two spawned processes (`evaluate` must then pickle: apps.slide_loop's
-    Replayer) with the same result as one after the other (tests/loop/test_slides.py)."""
+    Replayer) with the same result as one after the other (tests/loop/test_slides.py). `batch_folds`: the folds in
+    threads whose twin calls run as one batch (loop.fold_batches; `evaluate.many` runs them)."""
     folds = trial_folds(trial_numbers)
     jobs = [(evaluate, sset.subset(idx), sset.subset(folds[other(fold)]), settings, fold) for fold, idx in folds.items()]
-    if workers > 1:
+    if batch_folds:
+        parts = run_folds_together(run_fold, jobs, evaluate.many)
+    elif workers > 1:
         level = logging.getLogger().getEffectiveLevel()
         with ProcessPoolExecutor(min(workers, len(jobs)), mp_context=multiprocessing.get_context("spawn"),
                                  initializer=_log_to_stderr, initargs=(level,)) as pool:

@@ -163,23 +163,36 @@ def replay(mesh: SensorMesh, cfg: TwinConfig, binding: MarkerBinding, sset: Sequ
     """Every candidate on every trial of `sset`, one batch: markers (C, T, F, 127, 2) px and failed (C, T).
     `cfg` is the base twin; the scene (compliant phantom, the vessels near these slides) is added here;
     `lead_in_mm`: plan_replay's slide-in before the first measured pose."""
+    return replay_many(mesh, cfg, binding, [(sset, candidates)], scene, device, lead_in_mm)[0]
+
+
+def replay_many(mesh: SensorMesh, cfg: TwinConfig, binding: MarkerBinding, jobs: list[tuple[SequenceSet, list[dict]]],
+                scene: Scene, device: str | None = None, lead_in_mm: float = 0.0) -> list[tuple[np.ndarray, np.ndarray]]:
+    """`replay` of several (sequence set, candidates) jobs in one twin batch (the slide loop's folds together):
+    each job's (markers, failed) as its own replay gives them. An env's result does not depend on its batch: its
+    phantom keeps every vessel near its own path (Scene.near over the whole batch only adds far ones), and the
+    kernels never mix envs; on CUDA `kernel: auto` may pick the resident kernel for the larger batch (float order)."""
+    if len({sset.n_frames for sset, _ in jobs}) != 1:
+        raise ValueError("replay_many: the jobs' sequence sets need one frame count (the same measured frames)")
     tip_B = tip_node_B(mesh)
     reqs, trajs, samples, anchors = [], [], [], []
-    for params in candidates:
-        env, sched = split_params(params)
-        for t in range(sset.n_trials):
-            reqs.append(EnvRequest("slide", vessel=False, name=f"{sset.trials[t]['name']}", **env))
-            traj, frames = plan_replay(sset.pose_mm[t], scene, tip_B, sched.get("mount_dz_mm", 0.0), cfg.frame_dt,
-                                       lead_in_mm, (sched.get("tilt_x", 0.0), sched.get("tilt_y", 0.0)))
-            trajs.append(traj)
-            samples.append(frames)
-            anchors.append(sched.get("marker_anchor", 0.0))
+    for sset, candidates in jobs:
+        for params in candidates:
+            env, sched = split_params(params)
+            for t in range(sset.n_trials):
+                reqs.append(EnvRequest("slide", vessel=False, name=f"{sset.trials[t]['name']}", **env))
+                traj, frames = plan_replay(sset.pose_mm[t], scene, tip_B, sched.get("mount_dz_mm", 0.0),
+                                           cfg.frame_dt, lead_in_mm,
+                                           (sched.get("tilt_x", 0.0), sched.get("tilt_y", 0.0)))
+                trajs.append(traj)
+                samples.append(frames)
+                anchors.append(sched.get("marker_anchor", 0.0))
     schedule, _ = padded_schedule(trajs)
     cfg = scene_config(cfg, scene.near(schedule[:, :, :2, 3]))
     reqs = [r.resolved(cfg) for r in reqs]
     samples = np.stack(samples)  # (envs, F)
     batch = ScheduledBatch(mesh, cfg, reqs, trajs, schedule, device or cfg.device)
-    out = np.full((len(reqs), sset.n_frames, len(binding.node_ix), 2), np.nan)
+    out = np.full((len(reqs), jobs[0][0].n_frames, len(binding.node_ix), 2), np.nan)
     wanted = set(samples.ravel().tolist())
     for f in batch.frames():
         if f in wanted:
@@ -190,8 +203,12 @@ def replay(mesh: SensorMesh, cfg: TwinConfig, binding: MarkerBinding, sset: Sequ
             break
     out += np.array(anchors)[:, None, None, None] * (binding.template_px - binding.rest_px)
     failed = batch.sim.failed() | ~np.all(np.isfinite(out), axis=(1, 2, 3))
-    shape = (len(candidates), sset.n_trials)
-    return out.reshape(*shape, *out.shape[1:]), failed.reshape(shape)
+    parts, start = [], 0
+    for sset, candidates in jobs:
+        shape, end = (len(candidates), sset.n_trials), start + len(candidates) * sset.n_trials
+        parts.append((out[start:end].reshape(*shape, *out.shape[1:]), failed[start:end].reshape(shape)))
+        start = end
+    return parts
 
 
 def motion(markers: np.ndarray) -> np.ndarray:
