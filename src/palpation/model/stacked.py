@@ -340,13 +340,15 @@ def score_stack(stack: Stack, stats: list, clips: ClipSet, rest: np.ndarray, top
     for start in bar(range(0, n, batch_size), desc=f"score {len(stats)} seeds", unit="batch", enabled=progress):
         idx = np.arange(start, min(start + batch_size, n))
         if cache is not None and start in cache:
-            batches, lab = cache[start]
+            batches, lab, _ = cache[start]
         else:
             markers, lab = clips.gather(idx)
             feats = clip_features(markers, rest, topo, stats[0].remove_common_motion)
             batches = [make_batch(markers, lab, rest, topo, st, device, features=feats) for st in stats]
-            if cache is not None and _cached_bytes(cache) + _bytes(batches) <= VAL_CACHE_BYTES:
-                cache[start] = batches, lab
+            if cache is not None:  # each entry keeps its size: the total is a sum of ints, not of tensors
+                size = _bytes(batches)
+                if sum(kept[2] for kept in cache.values()) + size <= VAL_CACHE_BYTES:
+                    cache[start] = batches, lab, size
         p = torch.sigmoid(stack(batches)).view(len(stats), len(idx), topo.n_markers)[:, :, centre]
         probs.append(p.cpu().numpy().reshape(len(stats), -1))
         labels.append(lab.reshape(len(idx), -1)[:, centre].ravel())
@@ -357,6 +359,3 @@ def score_stack(stack: Stack, stats: list, clips: ClipSet, rest: np.ndarray, top
 def _bytes(batches: list) -> int:
     return sum(v.numel() * v.element_size() for b in batches for v in b.to_dict().values() if torch.is_tensor(v))
 
-
-def _cached_bytes(cache: dict) -> int:
-    return sum(_bytes(batches) for batches, _ in cache.values())
