@@ -49,7 +49,7 @@ def test_real_and_selftest_outputs(inputs, tmp_path):
     res = app.run(config(inputs, out))
     for name in ("report.md", "loop_real.csv", "rounds.json", "twin_fit/fitted.yaml", "fitted_params.yaml",
                  "rounds.png", "rounds.pdf", "modes.png", "modes.pdf", "residuals/residual_press_d4.png",
-                 "study.db"):
+                 "study.journal"):
         assert (out / name).exists(), name
     rows = list(csv.DictReader((out / "loop_real.csv").open()))
     assert tuple(rows[0]) == REAL_COLUMNS and rows[0]["round"] == "0" and rows[0]["effect_added"] == "none"

@@ -56,15 +56,22 @@ def test_startup_batch_then_sequential_and_improves(tmp_path):
     assert study.best_value > -0.1  # the GP finds the bowl's neighbourhood within 10 trials
 
 
-def test_same_seed_same_trials(tmp_path):
+def test_same_seed_same_trials_in_either_storage(tmp_path):
     a = search(tmp_path / "a.db")
     b = search(tmp_path / "b.db")
-    assert [t.params for t in a.trials] == [t.params for t in b.trials]
+    c = search(tmp_path / "c.journal")  # the loop's storage: the same search
+    assert [t.params for t in a.trials] == [t.params for t in b.trials] == [t.params for t in c.trials]
 
 
-def test_resume_after_kill(tmp_path):
+def test_unknown_study_file_is_refused(tmp_path):
+    with pytest.raises(ValueError, match=r"s\.sqlite: a study file must end in \.db"):
+        open_study(tmp_path / "s.sqlite", "bowl", make_sampler("gp", 0, 5), "maximize")
+
+
+@pytest.mark.parametrize("suffix", [".db", ".journal"])
+def test_resume_after_kill(tmp_path, suffix):
     """A trial asked by a process that died before proposing it is proposed and finished on resume."""
-    db = tmp_path / "r.db"
+    db = tmp_path / f"r{suffix}"
     study = open_study(db, "bowl", make_sampler("gp", 0, 5), "maximize")
     run_search(study, SPACE, 3, 5, 1, bowl)
     study.ask()  # left RUNNING without a proposal, as by a killed process
@@ -99,16 +106,17 @@ run_search(open_study(Path({db!r}), "bowl", make_sampler("gp", 0, 3), "maximize"
 """
 
 
+@pytest.mark.parametrize("suffix", [".db", ".journal"])
 @pytest.mark.parametrize("where", ["evaluate", "propose"])
-def test_resume_after_sigkill_is_exact(tmp_path, where):
+def test_resume_after_sigkill_is_exact(tmp_path, where, suffix):
     """A search killed inside a batch and resumed makes the same trials as one never interrupted."""
     import subprocess
     import sys
     from pathlib import Path
 
-    whole = open_study(tmp_path / "whole.db", "bowl", make_sampler("gp", 0, 3), "maximize")
+    whole = open_study(tmp_path / f"whole{suffix}", "bowl", make_sampler("gp", 0, 3), "maximize")
     run_search(whole, SPACE, 8, 3, 2, bowl)
-    db = tmp_path / "killed.db"
+    db = tmp_path / f"killed{suffix}"
     code = KILLED_SEARCH.format(tests=str(Path(__file__).parent), db=str(db), where=where)
     assert subprocess.run([sys.executable, "-c", code], timeout=300).returncode == -9
     killed = open_study(db, "bowl", make_sampler("gp", 0, 3), "maximize")

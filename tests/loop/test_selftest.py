@@ -54,7 +54,7 @@ def test_tiny_selftest_names_in_list_and_flags_out_of_list(tmp_path):
     template = load_targets(geometry_set, "geometry", [], cfg.selftest.states)
     geometry = {s.name: s for s in STATES}
     rows, _, _ = run_selftest(cfg, sim.simulate, base_params(twin), template, geometry, rest, tmp_path,
-                              tmp_path / "study.db", "ci")
+                              tmp_path / "study.journal", "ci")
     assert [r["effects_injected"] for r in rows] == ["surface_contact", "unlisted:marker_defect"]
     # the loop only saw the files: they are valid measured sets with the states it was given
     assert load_measured_set(tmp_path / "sets" / "run_000").names == ["press_d4", "twist_x_d2"]

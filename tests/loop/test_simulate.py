@@ -47,6 +47,23 @@ def test_workers_and_cache_change_no_bit():
     assert np.abs(ref[0] - ref[2]).max() > 0  # the parameters reach the markers (the test can fail)
 
 
+def test_pooled_twins_change_no_bit(monkeypatch):
+    """Calls of as many envs as an earlier one run on its twin (reset, new parameters, its graph replayed):
+    the same markers as a twin built per call."""
+    jobs = _jobs()
+    calls = [jobs[:3], jobs[3:6], [jobs[6], jobs[0], jobs[4]], jobs[1:3]]
+    pooled = _sim(workers=1, cache_bytes=0, split_by_kind=False)  # one batch a call, as on a GPU
+    got = [pooled.simulate(c) for c in calls]
+    assert sorted(pooled._twins) == [2, 3] and len(pooled._twins[3]) == 1  # three calls of 3 envs, one twin
+    monkeypatch.setattr("palpation.loop.simulate.IDLE_TWINS", 0)  # nothing kept: a twin built per call
+    built = _sim(workers=1, cache_bytes=0, split_by_kind=False)
+    for c, (m, bad) in zip(calls, got):
+        ref, ref_bad = built.simulate(c)
+        np.testing.assert_array_equal(m, ref)
+        np.testing.assert_array_equal(bad, ref_bad)
+    assert not built._twins
+
+
 def test_cache_is_bounded():
     sim = _sim(workers=1, cache_bytes=1)  # too small for one env: nothing kept, results still come
     sim.simulate(_jobs()[:2])

@@ -124,6 +124,35 @@ def test_scheduled_frames_equal_step_frame(mesh, device):
         b.step_scheduled()
 
 
+def test_reset_twin_replays_its_graph_for_a_new_schedule(mesh):
+    """A twin reset with new parameters and a schedule no longer than its last one keeps its graph and
+    arrays (loop.simulate's pool) and ends bit for bit where a freshly built twin does; a longer schedule
+    captures again."""
+    def poses(n, speed, drift):  # down at `speed` m/s to 2 mm into the phantom, drifting in y at `drift` m/s
+        z = [max(TOP + 0.001 - speed * 1.24e-3 * k, TOP - 0.002) for k in range(n)]
+        return np.stack([[dome_down(z[k], y + drift * 1.24e-3 * k) for y in (0.039, 0.036)] for k in range(n)])
+
+    used = BatchedTwin(mesh, 2, TwinConfig(), {"vessel": [1, 0]}, device="cpu")
+    used.reset(poses(20, 0.1, 0.0)[0])
+    used.set_schedule(poses(20, 0.1, 0.0)[1:])
+    for _ in range(19):
+        used.step_scheduled()
+    graph, arrays = used._sched_graph, used._sched_arrays
+    for n, speed, drift, params in [(14, 0.2, 0.02, {"vessel": [0, 1], "E": [9e5, 1.6e6]}),
+                                    (25, 0.15, -0.01, {"k_n": 5e3})]:
+        fresh = BatchedTwin(mesh, 2, TwinConfig(), params, device="cpu")
+        used.set_env_params(params)
+        for twin in (fresh, used):
+            twin.reset(poses(n, speed, drift)[0])
+            twin.set_schedule(poses(n, speed, drift)[1:])
+            for _ in range(n - 1):
+                twin.step_scheduled()
+        assert (used._sched_graph is graph and used._sched_arrays is arrays) == (n == 14)
+        np.testing.assert_array_equal(used.positions_world(), fresh.positions_world())
+        np.testing.assert_array_equal(used.contact_flags(), fresh.contact_flags())
+        np.testing.assert_array_equal(used.failed(), fresh.failed())
+
+
 @pytest.mark.parametrize("device", DEVICES)
 def test_gather_equals_scatter(mesh, device):
     """Per-node slot sums (no atomics) add the same terms in the same order as the CPU's scatter."""

@@ -5,7 +5,7 @@
 # The final twin (output `fit`) is a config-group option in package `twin`, the same mechanism as the
 # calibration's: a dataset rule reads it by declaring `fit=rules.loop.output.fit` as an input and adding
 # fit_overrides(input.fit) to its Hydra overrides (the loop's file also holds E).
-# The Optuna studies (results/loop/study.db, results/loop/selftest/study.db) are deliberately not
+# The Optuna studies (results/loop/study.journal, results/loop/selftest/study.journal) are deliberately not
 # outputs: Snakemake would delete them before a rerun, and they let a killed loop resume.
 
 LOOP_DIR = "results/loop"

@@ -8,7 +8,7 @@
 # Copy OUTDIR/loop_selftest.csv and selftest.md to docs/results/ afterwards. The run is detached
 # (workflow/scripts/device_run.sh): it outlives the command, LIMIT_S (default: until done) is how long a call
 # waits (exit 75: still running), and the same command again re-attaches (OUTDIR/selftest.pid). A killed run
-# resumes (the sets are re-made from the seed, the studies continue in OUTDIR/selftest/study.db).
+# resumes (the sets are re-made from the seed, the studies continue in OUTDIR/selftest/study.journal).
 # On the lent device (10 min per command; $OUT is emptied before each), until it exits 0:
 #   LIMIT_S=560 bash workflow/scripts/gpu_loop_selftest.sh results/loop_gpu; cp results/loop_gpu/*.{csv,md,json,log} $OUT/
 set -uo pipefail

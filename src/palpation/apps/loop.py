@@ -7,8 +7,8 @@
 Real mode writes under out.dir: report.md, loop_real.csv, rounds.json, twin_fit/fitted.yaml (the final
 twin, loaded downstream with hydra.searchpath=[file://<out.dir>] +twin_fit=fitted), fitted_params.yaml,
 modes.png/.pdf, rounds.png/.pdf, residuals/ (quivers per photo)
-and study.db (resumable). Self-test mode: loop_selftest.csv, selftest.md, selftest.json and
-selftest/ (the generated sets and their study.db).
+and study.journal (the Optuna studies, resumable). Self-test mode: loop_selftest.csv, selftest.md,
+selftest.json and selftest/ (the generated sets and their study.journal).
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ from palpation.loop import report
 from palpation.loop.config import LoopConfig
 from palpation.loop.inputs import load_targets
 from palpation.loop.real import make_problem, run_loop, twin_key
+from palpation.loop.recalibrate import LOOP_STUDY
 from palpation.loop.residual import decompose, image_direction_deg
 from palpation.loop.selftest import confusion, rows_csv, run_selftest, summary
 from palpation.loop.simulate import LoopSimulator, loop_twin_config
@@ -111,7 +112,7 @@ def run_real(cfg, loop: LoopConfig, tw, mset, source, sim, tkey, out: Path, reso
                   "share_explained": kept[0]["share_explained"] if kept else 0.0,
                   "tries": float(sum(r["round"] == k for r in p.rounds))}, k, cfg.track)
 
-        p = run_loop(mset, source, loop, sim.simulate, start, out / "study.db", tkey, on_round,
+        p = run_loop(mset, source, loop, sim.simulate, start, out / LOOP_STUDY, tkey, on_round,
                      progress=bool(cfg.progress), effects_on=effects_on)
         final = p.markers
         template = rest_template()
@@ -158,7 +159,7 @@ def run_self(cfg, loop: LoopConfig, tw, mset, source, sim, tkey, out: Path, star
     geometry = {s.name: s for s in mset.states}
     with _tracked(cfg, "selftest"):
         rows, _, _ = run_selftest(loop, sim.simulate, start, template, geometry, mset.rest,
-                                  out / "selftest", out / "selftest" / "study.db", tkey,
+                                  out / "selftest", out / "selftest" / LOOP_STUDY, tkey,
                                   progress=bool(cfg.progress))
         table = confusion(rows, loop.effects)
         summ = summary(rows)

@@ -14,7 +14,7 @@ SAMPLERS = ("gp", "tpe", "random")
 
 @dataclass
 class SearchSettings:
-    """One recalibration (an Optuna study per problem and round, persistent in <out>/study.db)."""
+    """One recalibration (an Optuna study per problem and round, persistent in <out>/study.journal)."""
 
     sampler: str = "gp"
     seed: int = 42

@@ -1,6 +1,6 @@
 """Recalibrate every problem's searched parameters with the calibration machinery, in lockstep.
 
-Each problem (a measured set in a round) gets its own persistent Optuna study in one SQLite file,
+Each problem (a measured set in a round) gets its own persistent Optuna study in one journal file,
 named after a hash of everything that changes what a trial means (data, round, effects, space,
 fixed values, sampler settings), so a killed run resumes and a changed setting starts afresh. The
 studies advance together: each step asks every unfinished study for its next proposals and simulates
@@ -38,6 +38,8 @@ def space_of(names: Sequence[str], overrides: Mapping[str, Sequence[float]] | No
     validate_space(space, known=set(PARAMS))
     return space
 
+
+LOOP_STUDY = "study.journal"  # the loop's study file under out.dir (calibration.search.study_storage)
 
 # bump when what a trial means changes in code (warm starts, objective): old studies are then not resumed
 SEARCH_VERSION = 5  # 5: nested starts (loop.refit.subset_starts) among the warm starts
@@ -138,7 +140,7 @@ def propose_parallel(db_path: Path, names: list[str], spaces: list, s: SearchSet
     """Ask every study for its next batch in `s.ask_workers` processes (a GP proposal costs ~0.5 s of CPU
     and 60 self-test problems ask thousands of them per round; the twin batch on a GPU takes seconds).
 
-    Each worker opens the study from the SQLite file with the sampler state the last proposal saved and
+    Each worker opens the study from the study file with the sampler state the last proposal saved and
     leaves its trials RUNNING with their parameters; the caller's next_batch then picks them up as an
     interrupted batch (calibration.search.interrupted), the same path a resumed search takes. Every study
     is asked by one worker at a time and told between rounds, so the proposals do not depend on the

@@ -105,9 +105,13 @@ class ScheduledBatch:
     """
 
     def __init__(self, mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest], trajs: list[Trajectory],
-                 schedule: np.ndarray, device):
+                 schedule: np.ndarray, device, twin: BatchedTwin | None = None):
         self.schedule = schedule
-        self.sim = BatchedTwin(mesh, len(requests), cfg, env_params(requests), device=device)
+        if twin is None:
+            self.sim = BatchedTwin(mesh, len(requests), cfg, env_params(requests), device=device)
+        else:  # a twin of an earlier batch, built from the same mesh and config for as many envs
+            self.sim = twin
+            twin.set_env_params(env_params(requests))
         self.sim.reset(np.stack([t.T_BA0 for t in trajs]))
 
     def frames(self, extra=None, progress: bool = False):
@@ -130,12 +134,15 @@ class LockedBatch:
     `outputs(sim)` (device arrays the frames write) and uploads the schedule under the lock, capturing the first
     frame's graph there; `for f in run` yields each frame index, the rest replayed outside the lock; `run.read(fn)`
     returns fn(sim, outputs) read under it; leaving frees every Warp array under it (nothing else may hold them).
-    `extra(sim, outputs, frame_index, offset)` launches kernels captured after each frame's physics.
+    `extra(sim, outputs, frame_index, offset)` launches kernels captured after each frame's physics. `twin`: an
+    earlier batch's `run.twin` (same mesh, config, env count) to run on instead of building one; without extra
+    kernels it also keeps its captured graph (loop.simulate's pool).
     """
 
     def __init__(self, mesh: SensorMesh, cfg: TwinConfig, requests: list[EnvRequest], trajs: list[Trajectory],
-                 schedule: np.ndarray, device, outputs=None, extra=None, progress: bool = False):
-        self._build = (mesh, cfg, requests, trajs, schedule, device)
+                 schedule: np.ndarray, device, outputs=None, extra=None, progress: bool = False,
+                 twin: BatchedTwin | None = None):
+        self._build = (mesh, cfg, requests, trajs, schedule, device, twin)
         self._outputs, self._extra, self._progress = outputs, extra, progress
 
     def __enter__(self) -> "LockedBatch":
@@ -157,6 +164,10 @@ class LockedBatch:
     def read(self, fn):
         with CAPTURE_LOCK:
             return fn(self._batch.sim, self._held)
+
+    @property
+    def twin(self) -> BatchedTwin:
+        return self._batch.sim
 
     def __exit__(self, *exc) -> None:
         with CAPTURE_LOCK:  # Warp arrays freed outside any other thread's capture
