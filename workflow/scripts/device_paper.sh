@@ -2,8 +2,18 @@
 # Run the paper profile on a CUDA node and pack its summaries into OUTDIR (no large datasets).
 # Needs an environment with the lock's packages importable (e.g. PYTHONPATH to a --target install).
 #   bash workflow/scripts/device_paper.sh OUTDIR [snakemake args...]
+# PALPATION_MPS=1 runs the jobs under NVIDIA MPS (a private control daemon, quit on exit): the GPU jobs running at
+# once (both loops, a Sim set, trainings) then share the SMs instead of taking turns, which the loops' small calls
+# need (docs/twin.md "The paper profile under MPS"). No setting of the card changes.
 set -uo pipefail
 out=$1; shift
+if [ "${PALPATION_MPS:-0}" = 1 ]; then
+  export CUDA_MPS_PIPE_DIRECTORY="$(mktemp -d /tmp/mps.XXXXXX)" CUDA_MPS_LOG_DIRECTORY="$out/mps_log"  # a socket path: short
+  mkdir -p "$CUDA_MPS_LOG_DIRECTORY"
+  nvidia-cuda-mps-control -d || { echo "PALPATION_MPS=1: nvidia-cuda-mps-control -d failed (see $out/mps_log)" >&2; exit 1; }
+  trap 'echo quit | nvidia-cuda-mps-control' EXIT
+  echo "MPS control daemon started (pipe $CUDA_MPS_PIPE_DIRECTORY)"
+fi
 export PYTHONPATH="$PWD/src${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 # a copied tree may carry stale git metadata: pass PALPATION_GIT_COMMIT=<sha> to record the right commit
 start=$(date +%s)
