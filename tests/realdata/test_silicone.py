@@ -107,6 +107,18 @@ def test_real_states_dots_and_labels(video3):
     assert summary["detected"] + summary["filled"] == 4 * 127
 
 
+def test_videos_tracked_in_processes_give_the_same_set(video3):
+    """workers=2: each video tracked in its own spawned process, the arrays as tracked in one."""
+    both = sil.build_silicone_set(videos=[2, 3], n_frames=4, workers=2)
+    assert both["videos"].tolist() == [2, 3]
+    alone2 = sil.build_silicone_set(videos=[2], n_frames=4)
+    for key, value in video3.items():
+        if key not in ("videos", "states", "frame_index", "line_angle_deg", "similarity_scale"):
+            np.testing.assert_array_equal(both[key][1], value[0], err_msg=key)
+            np.testing.assert_array_equal(both[key][0], alone2[key][0], err_msg=key)
+    assert both["similarity_scale"].tolist() == [alone2["similarity_scale"][0], video3["similarity_scale"][0]]
+
+
 @pytest.mark.slow
 def test_full_set_matches_spec_numbers():
     """The whole set (~40 s): SPEC §13.4 counts and the §13.5 panel agreement."""

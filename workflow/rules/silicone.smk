@@ -18,6 +18,8 @@ rule silicone_set:
         py=PY,
         hydra=lambda wildcards, output: hydra_dir(output.npz),
         figure=lambda wildcards, output: output.png[: -len(".png")],
+    # the videos tracked in parallel: the slide loop, the paper profile's critical path, waits for this set
+    threads: 4
     log:
         "results/logs/data/silicone_set.log",
     benchmark:
@@ -27,7 +29,7 @@ rule silicone_set:
     shell:
         "SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.silicone task=set"
         " video={input.video} template_photo={input.rest_photo}"
-        " out.npz={output.npz} out.json={output.json} out.figure={params.figure}"
+        " out.npz={output.npz} out.json={output.json} out.figure={params.figure} workers={threads}"
         " {params.hydra} > {log} 2>&1"
 
 

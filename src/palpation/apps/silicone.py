@@ -42,7 +42,7 @@ def _build(cfg: DictConfig) -> dict:
     video = Path(cfg.video)
     template = rest_template(cfg.template_photo)
     data = sil.build_silicone_set(video, list(cfg.videos), int(cfg.n_frames), params, template,
-                                  progress=bool(cfg.progress))
+                                  progress=bool(cfg.progress), workers=int(cfg.workers))
     meta = metadata(data, video, params)
     fig = silicone_overview(data, video, [tuple(x) for x in cfg.overview]) if cfg.figure else None
 
