@@ -4,10 +4,14 @@
 #   bash workflow/scripts/device_paper.sh OUTDIR [snakemake args...]
 # PALPATION_MPS=1 runs the jobs under NVIDIA MPS (a private control daemon, quit on exit): the GPU jobs running at
 # once (both loops, a Sim set, trainings) then share the SMs instead of taking turns, which the loops' small calls
-# need (docs/twin.md "The paper profile under MPS"). No setting of the card changes.
+# need, and six GPU jobs may run at once (--resources gpu=6; later arguments override it; the 16 cores still cap the
+# trainings at four). No setting of the card changes (docs/twin.md "The photo loop's host work, and the paper profile
+# under MPS").
 set -uo pipefail
 out=$1; shift
+gpu_jobs=()
 if [ "${PALPATION_MPS:-0}" = 1 ]; then
+  gpu_jobs=(--resources gpu=6)
   export CUDA_MPS_PIPE_DIRECTORY="$(mktemp -d /tmp/mps.XXXXXX)" CUDA_MPS_LOG_DIRECTORY="$out/mps_log"  # a socket path: short
   mkdir -p "$CUDA_MPS_LOG_DIRECTORY"
   nvidia-cuda-mps-control -d || { echo "PALPATION_MPS=1: nvidia-cuda-mps-control -d failed (see $out/mps_log)" >&2; exit 1; }
@@ -17,7 +21,7 @@ fi
 export PYTHONPATH="$PWD/src${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 # a copied tree may carry stale git metadata: pass PALPATION_GIT_COMMIT=<sha> to record the right commit
 start=$(date +%s)
-timeout -s INT "${SNAKE_TIMEOUT:-0}" python3 -m snakemake --workflow-profile workflow/profiles/paper --cores 16 --keep-going "$@" \
+timeout -s INT "${SNAKE_TIMEOUT:-0}" python3 -m snakemake --workflow-profile workflow/profiles/paper --cores 16 --keep-going "${gpu_jobs[@]}" "$@" \
   > "$out/snakemake.log" 2>&1
 rc=$?
 echo "snakemake rc=$rc after $(( $(date +%s) - start )) s"
