@@ -3,8 +3,9 @@ and a call waits until every fold still running has one; the last to arrive runs
 
 Why: a call holds 50-60 envs (6 effects x 2 asks x 5 trials). On CUDA the streamed kernels cost about linearly in
 the envs from there, and two fold processes only take turns on the card (one H100: a 50-env call 8.5-9.1 s alone,
-a 60-env call 19-20 s beside the other fold's). The frame-resident kernel runs any batch up to one wave (264 reference envs on an H100) in
-about one env's time, so one call of both folds' 100-120 envs costs about what one fold's did (docs/twin.md).
+a 60-env call 19-20 s beside the other fold's). The frame-resident kernel runs any batch up to one wave (264
+reference envs on an H100) in about one env's time, so one call of both folds' 100-120 envs costs about what one
+fold's did (docs/twin.md).
 The folds share nothing else; an env's result does not depend on its batch (loop.slides.replay_many), so on the CPU
 the loop gives the same bits as one fold after the other.
 """

@@ -93,7 +93,7 @@ class LoopSimulator:
         self._plans: dict[tuple, Trajectory] = {}  # planned schedule per (kind, depth, angle, heading)
         self._cache: OrderedDict[tuple, tuple] = OrderedDict()  # physics key -> (nodes, pose, failed), LRU
         self._cache_room, self._cache_used = int(cache_bytes), 0
-        self._twins: dict[int, list] = {}  # idle built twins by env count: a call reuses one and its graph
+        self._twins: list = []  # idle built twins, the most recently used last: a call reuses one of its size
         self._twins_lock = threading.Lock()  # the worker threads take and return them
         self.envs_simulated = 0  # distinct physics simulated so far (for the budget log)
         self.cache_hits = 0  # distinct physics read back from the cache instead
@@ -197,20 +197,20 @@ class LoopSimulator:
             self._cache_used -= n.nbytes + T.nbytes
 
     def _take_twin(self, n_envs: int):
-        """An idle twin built for `n_envs` envs, or None (LockedBatch builds one)."""
+        """The most recently used idle twin built for `n_envs` envs, or None (LockedBatch builds one)."""
         with self._twins_lock:
-            idle = self._twins.get(n_envs)
-            return idle.pop() if idle else None
+            for i in range(len(self._twins) - 1, -1, -1):
+                if self._twins[i].n_envs == n_envs:
+                    return self._twins.pop(i)
+        return None
 
     def _keep_twin(self, twin) -> None:
-        """Keep a twin for a later call of its size; past IDLE_TWINS the longest-kept size goes (freed
+        """Keep a twin for a later call of its size; past IDLE_TWINS the least recently used goes (freed
         under the capture lock, like every twin, warp_runtime.CAPTURE_LOCK)."""
         with self._twins_lock:
-            self._twins.setdefault(twin.n_envs, []).append(twin)
-            self._twins[twin.n_envs] = self._twins.pop(twin.n_envs)  # the most recent size last
-            evicted = []
-            while sum(map(len, self._twins.values())) > IDLE_TWINS:
-                evicted.append(self._twins.pop(next(iter(self._twins))))
+            self._twins.append(twin)
+            cut = max(0, len(self._twins) - IDLE_TWINS)
+            evicted, self._twins = self._twins[:cut], self._twins[cut:]
         with CAPTURE_LOCK:
             del evicted
 

@@ -166,8 +166,9 @@ def replay(mesh: SensorMesh, cfg: TwinConfig, binding: MarkerBinding, sset: Sequ
     return replay_many(mesh, cfg, binding, [(sset, candidates)], scene, device, lead_in_mm)[0]
 
 
-def replay_many(mesh: SensorMesh, cfg: TwinConfig, binding: MarkerBinding, jobs: list[tuple[SequenceSet, list[dict]]],
-                scene: Scene, device: str | None = None, lead_in_mm: float = 0.0) -> list[tuple[np.ndarray, np.ndarray]]:
+def replay_many(mesh: SensorMesh, cfg: TwinConfig, binding: MarkerBinding,
+                jobs: list[tuple[SequenceSet, list[dict]]], scene: Scene, device: str | None = None,
+                lead_in_mm: float = 0.0) -> list[tuple[np.ndarray, np.ndarray]]:
     """`replay` of several (sequence set, candidates) jobs in one twin batch (the slide loop's folds together):
     each job's (markers, failed) as its own replay gives them. An env's result does not depend on its batch: its
     phantom keeps every vessel near its own path (Scene.near over the whole batch only adds far ones), and the
