@@ -221,6 +221,17 @@ def test_sim_set_twin_follows_the_choice(tmp_path):
     stats = job_stats(dry_run(tmp_path / "abl", "results/train/report/twin_ablation.csv", *tiny, "--configfile", str(auto)))
     assert stats["train_twin_ablation_loop"] == 1 and stats["train_twin_ablation"] == 1
     assert stats["judge_dataset"] == 1 and not {"twin_choice", "simulate_dataset", "train"} & set(stats)
+    # with train.seeds_together, one job per twin trains all its seeds (issue 17), each on its twin's Sim set
+    auto.write_text("dataset: {twin: auto}\ntrain: {twin_ablation: {seeds: [0, 1]}, seeds_together: true}\n")
+    (tmp_path / "abl2").mkdir()
+    listing = dry_run(tmp_path / "abl2", "-p", "results/train/report/twin_ablation.csv", *tiny, "--configfile", str(auto))
+    stats = job_stats(listing)
+    assert stats["train_twin_ablation_seeds"] == 2 and not {"train_twin_ablation", "train_twin_ablation_loop"} & set(stats)
+    cmds = [ln for ln in listing.splitlines() if "SNAKEMAKE_RULE=train_twin_ablation_seeds " in ln]
+    assert len(cmds) == 2 and all("'seeds=[0,1]'" in c for c in cmds)
+    sims = {c.split("hydra.run.dir=results/train/")[1].split("/")[0]: c.split("data.sim=")[1].split()[0] for c in cmds}
+    assert sims == {"twin_calibrated": "results/sim/dataset_calibrated/manifest.json",
+                    "twin_loop": "results/judge/sim/photo_loop/manifest.json"}
     auto.write_text("dataset: {twin: best}\n")
     text = failing_dry_run(tmp_path / "bad", *tiny, "--configfile", str(auto))
     line = next(line for line in text.splitlines() if "'best'" in line)

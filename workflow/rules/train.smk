@@ -279,6 +279,38 @@ if TWIN_ABL_LOOP_RUN != TRAIN_RUN:
             overrides=lambda wildcards: train_overrides(wildcards, PHOTO_SIM),
 
 
+# With train.seeds_together the ablation's seeds train in one process per twin too, as the main sweep's do (its rows
+# then move as the sweep's did when its seeds were stacked; docs/results.md): one job of train.threads instead of one a
+# seed, whose cores the clip-length trainings waited for on the paper profile's critical path (issue 17).
+if TRAIN["seeds_together"] and TWIN_ABL["seeds"]:
+    _TWIN_ABL_SIMS = {"calibrated": rules.simulate_dataset_calibrated.output.manifest}
+    if TWIN_ABL_LOOP_RUN != TRAIN_RUN:
+        _TWIN_ABL_SIMS["loop"] = PHOTO_SIM
+
+    use rule train_seeds as train_twin_ablation_seeds with:
+        input:
+            unpack(lambda wildcards: train_inputs(wildcards, _TWIN_ABL_SIMS[wildcards.twin])),
+        output:
+            **run_files(expand(run_dir(f"{TRAIN_DIR}/twin_{{twin}}", "{exp}", "{clip_len}", "{seed}"),
+                               seed=TWIN_ABL["seeds"], allow_missing=True)),
+        log:
+            "results/logs/train/twin_{twin}_{exp}_L{clip_len}_seeds.log",
+        benchmark:
+            "results/benchmarks/train_twin_ablation_seeds/twin_{twin}_{exp}_L{clip_len}_seeds.tsv",
+        wildcard_constraints:
+            twin="|".join(_TWIN_ABL_SIMS),
+            exp="|".join(TWIN_ABL["experiments"]),
+            clip_len=str(TRAIN["clip_len"]),
+        params:
+            rule="train_twin_ablation_seeds",
+            seeds=yaml_list(TWIN_ABL["seeds"]),
+            overrides=lambda wildcards: train_overrides(wildcards, _TWIN_ABL_SIMS[wildcards.twin]),
+
+    ruleorder: train_twin_ablation_seeds > train_twin_ablation
+    if "loop" in _TWIN_ABL_SIMS:
+        workflow.ruleorder("train_twin_ablation_seeds", "train_twin_ablation_loop")
+
+
 rule twin_ablation_report:
     input:
         loop=twin_ablation_runs(TWIN_ABL_LOOP_RUN),
