@@ -73,6 +73,21 @@ def test_replay_markers_and_metrics():
     assert np.isfinite(vessel_ratio(markers[0], s.labels))
 
 
+def test_replay_plans_each_trial_once_per_geometry(monkeypatch):
+    """Candidates that differ only inside the kernels share a trial's pose schedule; a mount offset plans anew."""
+    import palpation.loop.slides as slides
+
+    planned = []
+    monkeypatch.setattr(slides, "plan_replay", lambda *a, **k: planned.append(a[3]) or plan_replay(*a, **k))
+    mesh = cached_sensor_mesh("coarse")
+    s = toy_set(2, 2, step_mm=1.5)
+    binding = bind_markers(mesh.nodes, mesh.dome_nodes, s.rest)
+    markers, _ = replay(mesh, TwinConfig(), binding, s, make_scene(s),
+                        [{"k_f": 1e7}, {"k_f": 1e8}, {"k_f": 1e7, "mount_dz_mm": 0.5}])
+    assert planned == [0.0, 0.0, 0.5, 0.5]  # two trials, two geometries
+    assert not np.allclose(markers[2], markers[0])  # the deeper mount pressed deeper
+
+
 def fake_twin(truth, want=None):
     """A fake twin whose motion nears the real one as each parameter nears `want` (log distance for k_f, E)."""
     want = want or {"k_f": 3e7, "mu": 0.8}

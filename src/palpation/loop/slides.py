@@ -18,6 +18,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,7 +73,8 @@ class Scene:
         if not len(self.segments_m):
             return self
         a, b = self.segments_m[:, 0][:, None], self.segments_m[:, 1][:, None]
-        q = np.asarray(tips_m, np.float64).reshape(-1, 2)[None]
+        # a batch's envs share most positions (the same trial under several candidates): each once
+        q = np.unique(np.asarray(tips_m, np.float64).reshape(-1, 2), axis=0)[None]
         ab = b - a
         u = np.clip(((q - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-18), 0.0, 1.0)
         dist = np.linalg.norm(q - (a + u[..., None] * ab), axis=-1).min(axis=1)
@@ -122,25 +124,29 @@ def plan_replay(pose_mm: np.ndarray, scene: Scene, tip_B_m: np.ndarray, dz_mm: f
     R = BASE_ROTATION.as_matrix()
     offset = R @ np.asarray(tip_B_m, np.float64)
     tip = table[0].copy()
-    target, poses, reached_at = 0, [], []
+    target, tips, reached_at = 0, [], []
+    # the controller steps one frame at a time; sqrt(x.dot(x)) is np.linalg.norm's own formula, without its
+    # per-call checks (this loop runs ~500 times a trial, for every trial of every candidate)
     while True:
-        if len(poses) >= MAX_FRAMES * 4:
-            raise ValueError(f"replay: waypoint {target} not reached within {len(poses)} frames; check pose_mm units (mm)")
+        if len(tips) >= MAX_FRAMES * 4:
+            raise ValueError(f"replay: waypoint {target} not reached within {len(tips)} frames; check pose_mm units (mm)")
         error = table[target] - tip
-        if np.linalg.norm(error) < REACH_TOL_M:  # reached: this frame applies no motion (SPEC §4.2)
-            reached_at.append(len(poses))
-            poses.append(pose_matrix(BASE_ROTATION, tip - offset))
+        if math.sqrt(error.dot(error)) < REACH_TOL_M:  # reached: this frame applies no motion (SPEC §4.2)
+            reached_at.append(len(tips))
+            tips.append(tip)
             if target == len(table) - 1:
                 break
             target += 1
             continue
         v = GAIN_PER_S * error
-        speed = np.linalg.norm(v)
+        speed = math.sqrt(v.dot(v))
         if speed > SPEED_CAP_M_S:
             v *= SPEED_CAP_M_S / speed
         tip = tip + v * frame_dt_s
-        poses.append(pose_matrix(BASE_ROTATION, tip - offset))
-    traj = Trajectory(kind="slide", T_BA0=pose_matrix(BASE_ROTATION, table[0] - offset), T_BA=np.stack(poses),
+        tips.append(tip)
+    poses = np.broadcast_to(pose_matrix(BASE_ROTATION, np.zeros(3)), (len(tips), 4, 4)).copy()
+    poses[:, :3, 3] = np.array(tips) - offset
+    traj = Trajectory(kind="slide", T_BA0=pose_matrix(BASE_ROTATION, table[0] - offset), T_BA=poses,
                       record_from=0, frame_dt_s=frame_dt_s)
     return traj, np.array(reached_at[2 + len(lead):])  # the measured frames (after approach and lead-in)
 
@@ -177,14 +183,18 @@ def replay_many(mesh: SensorMesh, cfg: TwinConfig, binding: MarkerBinding,
         raise ValueError("replay_many: the jobs' sequence sets need one frame count (the same measured frames)")
     tip_B = tip_node_B(mesh)
     reqs, trajs, samples, anchors = [], [], [], []
-    for sset, candidates in jobs:
+    plans = {}  # candidates that differ only inside the kernels share a trial's plan
+    for j, (sset, candidates) in enumerate(jobs):
         for params in candidates:
             env, sched = split_params(params)
+            geometry = (sched.get("mount_dz_mm", 0.0), (sched.get("tilt_x", 0.0), sched.get("tilt_y", 0.0)))
             for t in range(sset.n_trials):
                 reqs.append(EnvRequest("slide", vessel=False, name=f"{sset.trials[t]['name']}", **env))
-                traj, frames = plan_replay(sset.pose_mm[t], scene, tip_B, sched.get("mount_dz_mm", 0.0),
-                                           cfg.frame_dt, lead_in_mm,
-                                           (sched.get("tilt_x", 0.0), sched.get("tilt_y", 0.0)))
+                key = (j, t, geometry)
+                if key not in plans:
+                    plans[key] = plan_replay(sset.pose_mm[t], scene, tip_B, geometry[0], cfg.frame_dt, lead_in_mm,
+                                             geometry[1])
+                traj, frames = plans[key]
                 trajs.append(traj)
                 samples.append(frames)
                 anchors.append(sched.get("marker_anchor", 0.0))
