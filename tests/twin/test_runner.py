@@ -2,6 +2,7 @@
 
 import gc
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -107,7 +108,8 @@ def compose_simulate(mesh_path: Path, out_dir: Path, workers: int = 0, extra: tu
 
 def test_a_set_with_the_same_request_is_copied_not_simulated(tmp_path, mesh):
     """reuse=[manifest]: the same draws, twin and mesh copy the finished set byte for byte (rule simulate_dataset and
-    the chosen candidate's set); another seed or twin parameter simulates anew; a bad path is a one-line error."""
+    the chosen candidate's set), hard-linked on one file system; another seed or twin parameter simulates anew; a
+    rewrite of the source leaves the copy as it was; a bad path is a one-line error."""
     from palpation.apps.simulate import run
 
     mesh_path = tmp_path / "mesh.npz"
@@ -123,6 +125,11 @@ def test_a_set_with_the_same_request_is_copied_not_simulated(tmp_path, mesh):
     for extra in (("seed=7",), ("twin.contact.c_n=5.0",)):
         other = run(compose_simulate(mesh_path, tmp_path / "c", extra=(f"reuse=[{source}]", *extra)))
         assert other["reused"] == 0 and "reused_from" not in json.loads(Path(other["manifest"]).read_text())
+    # the copy is a hard link here (one file system); rewriting the source set replaces its files, not the copy's
+    before = (tmp_path / "b" / "trajectory_0000.npz").read_bytes()
+    assert os.path.samefile(tmp_path / "a" / "trajectory_0000.npz", tmp_path / "b" / "trajectory_0000.npz")
+    run(compose_simulate(mesh_path, tmp_path / "a", extra=("seed=7",)))
+    assert (tmp_path / "b" / "trajectory_0000.npz").read_bytes() == before != (tmp_path / "a" / "trajectory_0000.npz").read_bytes()
     with pytest.raises(FileNotFoundError, match="config reuse: .*nope.json is not a readable Sim-set manifest"):
         run(compose_simulate(mesh_path, tmp_path / "d", extra=(f"reuse=[{tmp_path / 'nope.json'}]",)))
 
