@@ -4,14 +4,15 @@
 #   bash workflow/scripts/device_paper.sh OUTDIR [snakemake args...]
 # PALPATION_MPS=1 runs the jobs under NVIDIA MPS (a private control daemon, quit on exit): the GPU jobs running at
 # once (both loops, a Sim set, trainings) then share the SMs instead of taking turns, which the loops' small calls
-# need, and six GPU jobs may run at once (--resources gpu=6; later arguments override it; the 16 cores still cap the
-# trainings at four). No setting of the card changes (docs/twin.md "The photo loop's host work, and the paper profile
-# under MPS").
+# need, and six GPU jobs may run at once (--resources gpu=6) on 20 counted cores (--cores 20, so that five trainings of
+# four threads run at once: the clip-length trainings and the twin ablation's no longer wait for each other's cores;
+# later arguments override both). No setting of the card changes (docs/twin.md "The photo loop's host work, and the
+# paper profile under MPS").
 set -uo pipefail
 out=$1; shift
 gpu_jobs=()
 if [ "${PALPATION_MPS:-0}" = 1 ]; then
-  gpu_jobs=(--resources gpu=6)
+  gpu_jobs=(--resources gpu=6 --cores 20)
   export CUDA_MPS_PIPE_DIRECTORY="$(mktemp -d /tmp/mps.XXXXXX)" CUDA_MPS_LOG_DIRECTORY="$out/mps_log"  # a socket path: short
   mkdir -p "$CUDA_MPS_LOG_DIRECTORY"
   nvidia-cuda-mps-control -d || { echo "PALPATION_MPS=1: nvidia-cuda-mps-control -d failed (see $out/mps_log)" >&2; exit 1; }
