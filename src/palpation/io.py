@@ -82,6 +82,20 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
             tmp_path.unlink()
 
 
+def hard_link(src: str | os.PathLike, dest: str | os.PathLike) -> bool:
+    """Make `dest` (replaced if present) a hard link to `src`; False where links are impossible (another file
+    system, or not allowed), `dest` then absent. Safe for files only ever rewritten by renaming a new file into
+    place (atomic_path): a later rewrite of either name leaves the other's bytes."""
+    dest = Path(dest)
+    with contextlib.suppress(FileNotFoundError):
+        dest.unlink()
+    try:
+        os.link(src, dest)
+    except OSError:
+        return False
+    return True
+
+
 def save_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
     with atomic_path(path, suffix=".npz") as tmp:
         np.savez_compressed(tmp, **arrays)

@@ -26,6 +26,7 @@ from typing import Any, Iterable, Iterator, Mapping
 
 from filelock import FileLock
 
+from palpation.io import hard_link
 from palpation.paths import REPO_ROOT, results_dir
 from palpation.process import process_gone, process_id
 
@@ -252,14 +253,9 @@ def log_artifact(path: str | os.PathLike, artifact_path: str | None = None) -> N
     if uri.startswith("file://"):
         dest = Path(urllib.parse.unquote(urllib.parse.urlparse(uri).path)) / src.name
         dest.parent.mkdir(parents=True, exist_ok=True)
-        with contextlib.suppress(FileNotFoundError):
-            dest.unlink()
-        try:
-            os.link(src, dest)
+        if hard_link(src, dest):
             return
-        except OSError:  # another file system, or links not allowed: copy
-            pass
-    mlflow.log_artifact(str(src), artifact_path=artifact_path)
+    mlflow.log_artifact(str(src), artifact_path=artifact_path)  # another file system, or links not allowed: copy
 
 
 def log_checkpoint(path: str | os.PathLike, params: Mapping[str, Any] | None = None) -> str:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from palpation.io import atomic_path, read_npz, save_json, save_npz
+from palpation.io import atomic_path, hard_link, read_npz, save_json, save_npz
 
 FORMAT = "palpation-sim/1"
 KEYS = ("markers", "labels", "centreline_px", "contact", "T_BA", "frame_index", "centreline_A",
@@ -125,8 +125,8 @@ def copy_outputs(src_manifest: str | os.PathLike, out_dir: str | os.PathLike, me
                  manifest_name: str = "manifest.json") -> Path:
     """Copy a finished set (its manifest's files) into `out_dir` with the same discipline as write_outputs: the
     earlier run's files cleared first, each file written whole, the manifest last, its meta updated by `meta`.
-    A file is hard-linked where the file system allows it: sets are only ever rewritten by renaming new files
-    into place (atomic_path), so a later run of either set leaves the other's files as they were."""
+    A file is hard-linked where the file system allows it (io.hard_link): sets are only ever rewritten by renaming
+    new files into place, so a later run of either set leaves the other's files as they were."""
     src_manifest = Path(src_manifest)
     data = json.loads(src_manifest.read_text())
     out_dir = Path(out_dir)
@@ -134,10 +134,7 @@ def copy_outputs(src_manifest: str | os.PathLike, out_dir: str | os.PathLike, me
     for entry in data["files"]:
         name = Path(entry["file"]).name
         with atomic_path(out_dir / name) as tmp:
-            tmp.unlink()
-            try:
-                os.link(src_manifest.parent / name, tmp)
-            except OSError:  # another file system, or links not allowed
+            if not hard_link(src_manifest.parent / name, tmp):
                 shutil.copyfile(src_manifest.parent / name, tmp)
     save_json(path, {**data, **meta})
     return path
