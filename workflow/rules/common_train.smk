@@ -125,3 +125,9 @@ def group_overrides(exps, sim=TRAIN_DATA["sim"], recipe=TRAIN["recipe"]):
     others = {k: v for k, v in group_inputs(exps[1:], sim, recipe).items() if k != "conf" and k not in own}
     return " ".join([train_overrides(SimpleNamespace(exp=exps[0]), sim, recipe)]
                     + [f"data.{k}={v}" for k, v in others.items()] + [also_test_arg(exps[1:])])
+
+
+def twin_ablation_sim(wildcards):
+    """The Sim set of the dataset-twin ablation's {twin} (train_twin_ablation_seeds): the calibrated candidate's set
+    (dataset.smk's rule, looked up when a job needs it) or the photo loop's."""
+    return rules.simulate_dataset_calibrated.output.manifest if wildcards.twin == "calibrated" else PHOTO_SIM

@@ -284,14 +284,11 @@ if TWIN_ABL_LOOP_RUN != TRAIN_RUN:
 # train.threads instead of one a seed, whose cores the clip-length trainings waited for on the paper profile's critical
 # path (issue 17).
 if TRAIN["seeds_together"] and TWIN_ABL["seeds"]:
-    # each twin's Sim set, looked up when a job needs it (dataset.smk's rule, as for train_twin_ablation)
-    _TWIN_ABL_SIMS = {"calibrated": lambda: rules.simulate_dataset_calibrated.output.manifest}
-    if TWIN_ABL_LOOP_RUN != TRAIN_RUN:
-        _TWIN_ABL_SIMS["loop"] = lambda: PHOTO_SIM
+    _TWIN_ABL_TWINS = ["calibrated"] + (["loop"] if TWIN_ABL_LOOP_RUN != TRAIN_RUN else [])
 
     use rule train_seeds as train_twin_ablation_seeds with:
         input:
-            unpack(lambda wildcards: train_inputs(wildcards, _TWIN_ABL_SIMS[wildcards.twin]())),
+            unpack(lambda wildcards: train_inputs(wildcards, twin_ablation_sim(wildcards))),
         output:
             **run_files(expand(run_dir(f"{TRAIN_DIR}/twin_{{twin}}", "{exp}", "{clip_len}", "{seed}"),
                                seed=TWIN_ABL["seeds"], allow_missing=True)),
@@ -300,16 +297,16 @@ if TRAIN["seeds_together"] and TWIN_ABL["seeds"]:
         benchmark:
             "results/benchmarks/train_twin_ablation_seeds/twin_{twin}_{exp}_L{clip_len}_seeds.tsv",
         wildcard_constraints:
-            twin="|".join(_TWIN_ABL_SIMS),
+            twin="|".join(_TWIN_ABL_TWINS),
             exp="|".join(TWIN_ABL["experiments"]),
             clip_len=str(TRAIN["clip_len"]),
         params:
             rule="train_twin_ablation_seeds",
             seeds=yaml_list(TWIN_ABL["seeds"]),
-            overrides=lambda wildcards: train_overrides(wildcards, _TWIN_ABL_SIMS[wildcards.twin]()),
+            overrides=lambda wildcards: train_overrides(wildcards, twin_ablation_sim(wildcards)),
 
     ruleorder: train_twin_ablation_seeds > train_twin_ablation
-    if "loop" in _TWIN_ABL_SIMS:
+    if "loop" in _TWIN_ABL_TWINS:
         workflow.ruleorder("train_twin_ablation_seeds", "train_twin_ablation_loop")
 
 
