@@ -218,12 +218,27 @@ def test_layered_agreement_over_a_short_slide(mesh, cpu_lanes):
 
 
 @pytest.mark.parametrize("layered", [False, True])
-def test_auto_kernel_is_streamed_on_the_cpu(mesh, layered):
-    ref, sim_ref = _press(mesh, "streamed", frames=3, layered=layered)
-    got, sim = _press(mesh, "auto", frames=3, layered=layered)
-    assert sim.resident is None
+@pytest.mark.parametrize("cpu_blocks", [False, True])
+def test_auto_kernel_on_the_cpu_keeps_the_streamed_bits(mesh, layered, cpu_blocks):
+    """auto on the CPU: the compact resident kernel, one lane in mesh order (even where cooperative CPU blocks
+    are on and block_dim says 320), so every sum runs in the streamed scatter's order."""
+    ref, sim_ref = _press(mesh, "streamed", layered=layered)
+    wp.config.enable_cpu_blocks = cpu_blocks
+    try:
+        got, sim = _press(mesh, "auto", layered=layered, block_dim=320)
+    finally:
+        wp.config.enable_cpu_blocks = False
+    assert sim.resident is not None and sim.resident.variant == "compact" and sim.resident.block_dim == 1
+    assert sim.contact_flags()[0] and not sim.contact_flags()[1]
     np.testing.assert_array_equal(got, ref)
+    np.testing.assert_array_equal(sim.velocities_world(), sim_ref.velocities_world())
     np.testing.assert_array_equal(sim.contact_forces(), sim_ref.contact_forces())
+
+
+def test_auto_kernel_on_the_cpu_needs_sdf_contact(mesh):
+    cfg = TwinConfig()
+    cfg.integrator.kernel, cfg.contact.rule = "auto", "centroid"
+    assert BatchedTwin(mesh, 1, cfg, device="cpu").resident is None
 
 
 def test_auto_kernel_choice_on_cuda(mesh, monkeypatch):

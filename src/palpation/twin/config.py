@@ -75,8 +75,8 @@ class IntegratorConfig:
     # "streamed": one launch per pass per substep, state in global memory (the reference path, and
     # the CPU path); "resident": one launch per frame, each env's x, v, f in one block's shared
     # memory (twin/resident.py, issue 17; SDF contact; the layered elastic kernel in LAYERED_VARIANTS);
-    # "auto": resident on CUDA where the config and the block's shared memory allow it, else streamed
-    # (always streamed on the CPU: the same bits as "streamed"; resident.runs_resident)
+    # "auto": resident on CUDA where the config and the block's shared memory allow it; on the CPU resident with one
+    # lane in mesh order (SDF contact), the same bits as "streamed"; else streamed (resident.runs_resident)
     kernel: str = "streamed"
     # "auto" runs the streamed kernels for batches of fewer envs: a resident env is one block on one SM whatever the
     # batch, so few envs leave most SMs idle. The crossover depends on the scene (H100, docs/twin.md): 40 envs for a

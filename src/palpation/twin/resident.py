@@ -29,6 +29,11 @@ from palpation.twin.resident_sync import (NEED_BIT, chunk_table, contact_and_con
                                          packed_kernel)
 
 VEC3 = 12
+# twin.integrator.kernel=auto on the CPU: the "compact" variant in mesh order with one lane a block sums every force
+# in the streamed scatter's order, so it gives the streamed kernels' bits, 1.5x faster on the coarse mesh (one
+# launch a frame instead of two a substep; tests/twin/test_resident.py, docs/twin.md)
+CPU_AUTO = "compact"
+CPU_SHARED_BYTES = 256 * 1024  # Warp's fixed shared-memory block of a CPU launch (WP_MAX_CPU_SHARED in tile.h)
 
 
 def color_tets(tets: np.ndarray, needs_force: np.ndarray, cap: int | None = None,
@@ -191,6 +196,7 @@ class ResidentLayout:
         if atomic:  # colour order (a warp's tets rarely share a node, so its atomics rarely
             start = start[[0, -1]]  # collide), full chunks across colours: no barrier between them
         self.variant = variant
+        self.block_dim = cap or 1  # the launch's threads a block: a colour fills at most one block's lanes
         self.n_colors = len(start) - 1
         self.n_tets = len(order)
         self.need = wp.array(needs_force.astype(np.int32), dtype=wp.int32, device=device)
@@ -258,9 +264,10 @@ def block_lanes(device, block_dim: int) -> int:
     return block_dim if wp.get_device(device).is_cuda or wp.config.enable_cpu_blocks else 1
 
 
-def launch_resident(sim, block_dim: int) -> None:
+def launch_resident(sim) -> None:
     """All substeps of one frame of `sim` (a BatchedTwin) in one launch: one block per env."""
     lay, d = sim.resident, sim.cfg.damping
+    block_dim = lay.block_dim
     consts = lay.constants(block_lanes(sim.device, block_dim))
     wp.launch_tiled(lay.kernel, dim=[sim.n_envs], block_dim=block_dim, device=sim.device,
                     inputs=[*consts, sim.inv_mass, sim.fixed, sim.on_surface, sim.env_mu, sim.env_lam,
@@ -276,18 +283,21 @@ def resident_shared_bytes(variant: str, n_nodes: int, n_force: int) -> int:
 def runs_resident(cfg, needs_force: np.ndarray, device, n_envs: int) -> bool:
     """Whether `cfg.integrator.kernel` selects the frame-resident kernel for `n_envs` envs on `device`.
 
-    "auto": on CUDA where the config allows it (SDF contact; the layered elastic kernel only in the packed
-    variants), for batches of at least `auto_min_envs` envs, and where an env's tiles fit one block's shared
-    memory (plus 4 KB of static shared memory); else the streamed kernels. Always the streamed ones on the CPU,
-    so every CPU result keeps its bits."""
+    "auto" (SDF contact only): on CUDA where the config allows it (the layered elastic kernel only in the
+    packed variants), for batches of at least `auto_min_envs` envs, and where an env's tiles fit one block's
+    shared memory (plus 4 KB of static shared memory). On the CPU for any batch whose tiles fit Warp's CPU
+    block (CPU_AUTO: one lane in mesh order, the streamed kernels' bits). Else the streamed kernels."""
     ig = cfg.integrator
     if ig.kernel != "auto":
         return ig.kernel == "resident"
     dev = wp.get_device(device)
-    if (not dev.is_cuda or cfg.contact.rule != "sdf" or n_envs < ig.auto_min_envs
-            or (cfg.layered and ig.resident_variant not in LAYERED_VARIANTS)):
-        return False
     n = len(needs_force)
+    if cfg.contact.rule != "sdf":
+        return False
+    if not dev.is_cuda:
+        return n < NEED_BIT and resident_shared_bytes(CPU_AUTO, n, int(needs_force.sum())) <= CPU_SHARED_BYTES
+    if n_envs < ig.auto_min_envs or (cfg.layered and ig.resident_variant not in LAYERED_VARIANTS):
+        return False
     if ig.resident_variant not in ("tiles", "onesync") and n >= NEED_BIT:  # 15-bit packed corner indices
         return False
     return resident_shared_bytes(ig.resident_variant, n, int(needs_force.sum())) + 4096 <= \
@@ -301,8 +311,13 @@ def resident_layout(mesh, needs_force: np.ndarray, device, cfg, n_envs: int, she
     if not runs_resident(cfg, needs_force, device, n_envs):
         return None
     ig = cfg.integrator
+    tet_shell = shell if cfg.layered else None
+    if ig.kernel == "auto" and not wp.get_device(device).is_cuda:  # one lane in mesh order: no colours needed
+        return per_mesh(mesh, ("resident", str(device), CPU_AUTO, cfg.layered, cfg.material.shell_thickness),
+                        lambda: ResidentLayout.for_mesh(mesh, needs_force, device, colored=False, variant=CPU_AUTO,
+                                                        tet_shell=tet_shell))
     key = ("resident", str(device), block_lanes(device, ig.block_dim), ig.block_dim, ig.resident_variant,
            ig.resident_coloring, cfg.layered, cfg.material.shell_thickness)
     return per_mesh(mesh, key, lambda: ResidentLayout.for_mesh(
         mesh, needs_force, device, cap=ig.block_dim, variant=ig.resident_variant, coloring=ig.resident_coloring,
-        tet_shell=shell if cfg.layered else None))
+        tet_shell=tet_shell))

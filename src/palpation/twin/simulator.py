@@ -305,7 +305,7 @@ class BatchedTwin:
                   outputs=[self.v])
         self.contact_flag.zero_()
         if self.resident is not None:  # all substeps in one launch, one block per env
-            launch_resident(self, self.cfg.integrator.block_dim)
+            launch_resident(self)
         else:
             for _ in range(self.substeps):
                 self.substep()
