@@ -1,5 +1,7 @@
 """The frame-resident kernel (twin.integrator.kernel=resident) against the streamed kernels, on the CPU."""
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 import pytest
 import warp as wp
@@ -233,6 +235,16 @@ def test_auto_kernel_on_the_cpu_keeps_the_streamed_bits(mesh, layered, cpu_block
     np.testing.assert_array_equal(got, ref)
     np.testing.assert_array_equal(sim.velocities_world(), sim_ref.velocities_world())
     np.testing.assert_array_equal(sim.contact_forces(), sim_ref.contact_forces())
+
+
+def test_cpu_resident_twins_in_threads(mesh):
+    """Warp's CPU tile kernels share one static pointer to their tiles: twins stepping side by side in threads
+    (the loop's and the Sim-set writer's workers) take turns (resident.CPU_TILES_LOCK), each with its own bits."""
+    ref, _ = _press(mesh, "auto", frames=4)
+    with ThreadPoolExecutor(2) as pool:
+        runs = list(pool.map(lambda _: _press(mesh, "auto", frames=4)[0], range(4)))
+    for got in runs:
+        np.testing.assert_array_equal(got, ref)
 
 
 def test_auto_kernel_on_the_cpu_needs_sdf_contact(mesh):

@@ -15,6 +15,7 @@ passes (elastic -> node -> next substep). docs/twin.md gives the design and its 
 from __future__ import annotations
 
 import functools
+import threading
 
 import numpy as np
 import warp as wp
@@ -34,6 +35,10 @@ VEC3 = 12
 # launch a frame instead of two a substep; tests/twin/test_resident.py, docs/twin.md)
 CPU_AUTO = "compact"
 CPU_SHARED_BYTES = 256 * 1024  # Warp's fixed shared-memory block of a CPU launch (WP_MAX_CPU_SHARED in tile.h)
+# Warp's CPU tile kernels find that block through one static pointer (tile.h: its JIT has no thread-local storage on
+# x86-64), so two threads of a process running them at once corrupt each other's tiles (the residual loop's worker
+# threads crashed): a CPU twin on the resident kernel advances its frames under this lock
+CPU_TILES_LOCK = threading.Lock()
 
 
 def color_tets(tets: np.ndarray, needs_force: np.ndarray, cap: int | None = None,

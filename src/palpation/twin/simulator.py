@@ -10,6 +10,7 @@ nothing: the frame index lives on the device.
 from __future__ import annotations
 
 import logging
+from contextlib import nullcontext
 
 import numpy as np
 import warp as wp
@@ -23,7 +24,7 @@ from palpation.twin.integrate import (advance_frame, check_nodes, check_tets, in
                                       set_control_velocity, snap_fixed_nodes)
 from palpation.twin.mesh import (SensorMesh, build_vessel_points, morton_order, per_mesh, projected_node_area,
                                  shell_weights)
-from palpation.twin.resident import launch_resident, resident_layout
+from palpation.twin.resident import CPU_TILES_LOCK, launch_resident, resident_layout
 from palpation.twin.warp_runtime import resolve_device
 from palpation.twin.parameters import CONTACT_KEYS, ENV_KEYS, LAYERED_KEYS, by_env_key, per_env_keys
 
@@ -65,6 +66,7 @@ class BatchedTwin:
         th = cfg.material.shell_thickness
         shell = per_mesh(mesh, ("shell", th), lambda: shell_weights(mesh.nodes, mesh.tets, th))
         self.resident = resident_layout(mesh, needs_force, dev, cfg, n, shell)  # None: the streamed kernels
+        self._frame_lock = CPU_TILES_LOCK if self.resident is not None and not dev.is_cuda else nullcontext()
         self.tet_order = np.concatenate([moving_ix, np.flatnonzero(~moving)])
         self.n_force_tets = len(moving_ix)
         tets = mesh.tets[self.tet_order]
@@ -221,14 +223,15 @@ class BatchedTwin:
         self.pose_t.assign(self._pose[:, :3, 3].astype(np.float32))
         self.delta_R.assign((delta[:, :3, :3] - np.eye(3)).astype(np.float32))
         self.delta_t.assign(delta[:, :3, 3].astype(np.float32))
-        if self.use_graph:
-            if self.graph is None:
-                with wp.ScopedCapture(device=self.device) as capture:
-                    self._frame()
-                self.graph = capture.graph
-            wp.capture_launch(self.graph)
-        else:
-            self._frame()
+        with self._frame_lock:
+            if self.use_graph:
+                if self.graph is None:
+                    with wp.ScopedCapture(device=self.device) as capture:
+                        self._frame()
+                    self.graph = capture.graph
+                wp.capture_launch(self.graph)
+            else:
+                self._frame()
         self._pose = T_next
         self.frame += 1
         self._schedule = self._sched_graph = None  # the schedule's increments start elsewhere now
@@ -266,14 +269,15 @@ class BatchedTwin:
         if self._schedule is None or self._sched_next >= len(self._schedule):
             raise ValueError("step_scheduled needs a schedule with frames left: call set_schedule after "
                              "reset (step_frame and reset discard it)")
-        if self.use_graph:
-            if self._sched_graph is None:
-                with wp.ScopedCapture(device=self.device) as capture:
-                    self._frame(scheduled=True)
-                self._sched_graph = capture.graph
-            wp.capture_launch(self._sched_graph)
-        else:
-            self._frame(scheduled=True)
+        with self._frame_lock:
+            if self.use_graph:
+                if self._sched_graph is None:
+                    with wp.ScopedCapture(device=self.device) as capture:
+                        self._frame(scheduled=True)
+                    self._sched_graph = capture.graph
+                wp.capture_launch(self._sched_graph)
+            else:
+                self._frame(scheduled=True)
         self._pose = self._schedule[self._sched_next]
         self._sched_next += 1
         self.frame += 1
