@@ -59,6 +59,18 @@ def test_same_seed_bit_identical_and_checkpoint_round_trip(meat, tmp_path):
     assert np.array_equal(predict(model, sets["val"], stats, rest, topo, 2)[0], scores[0][0])
 
 
+def test_val_scores_are_the_returned_models(meat):
+    """fit keeps the best epoch's val scores (the post-hoc calibration's input): the bits predict gives with the
+    returned model, also when an earlier epoch wins."""
+    rest, topo, sets = meat
+    cfg = TrainConfig(batch_size=2, epochs=3, train_batches=2, val_batches=2, select_metric="ap")
+    run = fit(sets["train"], sets["val"], rest, topo, COMPACT, cfg, seed=5)
+    again = predict(run.model, sets["val"], run.stats, rest, topo, 2, 2)
+    assert np.array_equal(run.val_scores[0], again[0]) and np.array_equal(run.val_scores[1], again[1])
+    scores = [row["val/ap"] for row in run.history]
+    assert run.best_epoch == int(np.argmax(scores)) == 0 and run.best_val_score == max(scores)  # seed 5: epoch 0
+
+
 def test_progress_bar_on_stderr_only_when_asked_and_results_unchanged(meat, capsys):
     rest, topo, sets = meat
     quiet = fit(sets["train"], sets["val"], rest, topo, COMPACT, TINY, seed=3, progress=False)

@@ -20,6 +20,9 @@ rule silicone_set:
         figure=lambda wildcards, output: output.png[: -len(".png")],
     # the videos tracked in parallel: the slide loop, the paper profile's critical path, waits for this set
     threads: 4
+    # ... and so do the trainings' test sets. First: on 2 cores its threads need both, and behind the residual loop
+    # (which takes one core for ~4 min in the quick profile) it waited for the loop's end with one core idle
+    priority: 20
     log:
         "results/logs/data/silicone_set.log",
     benchmark:

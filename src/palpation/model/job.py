@@ -242,8 +242,9 @@ def finish_job(job: TrainJob, result: FitResult, d: JobData, out_dir: str | Path
         cal, fitted_on = fit_calibrator(fit_on[0], fit_on[1], "platt"), fit_on[2]
         calibration["calibration_fitted_on"] = fitted_on
     elif job.train.calibration != "none":  # fitted on the training domain's val split, never on test
-        val_probs, val_labels = predict(result.model, val, result.stats, rest, topo, job.train.batch_size,
-                                        job.train.val_batches, job.train.device)
+        val_probs, val_labels = result.val_scores or predict(result.model, val, result.stats, rest, topo,
+                                                             job.train.batch_size, job.train.val_batches,
+                                                             job.train.device)
         cal = fit_calibrator(val_probs, val_labels, job.train.calibration)
     if cal is not None:
         raw = probs

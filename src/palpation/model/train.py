@@ -130,6 +130,9 @@ class FitResult:
     history: list = field(default_factory=list)  # per-epoch dicts
     train_seconds: float = 0.0
     steps: list = field(default_factory=list)  # (metrics, step) to log afterwards (model.stacked); fit logs live
+    # the best epoch's val (probs, labels): what `predict` gives with `model` (fit; None from model.stacked, whose
+    # vmapped scores may differ from one model's in float order), so the post-hoc calibration need not score again
+    val_scores: tuple | None = None
 
 
 def fit(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology, model_cfg: ModelConfig,
@@ -149,7 +152,7 @@ def fit(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology, mode
     n_batches = -(-len(train) // cfg.batch_size)
     if cfg.train_batches:
         n_batches = min(n_batches, cfg.train_batches)
-    best, best_state, best_epoch, history, step = -1.0, None, -1, [], 0
+    best, best_state, best_epoch, history, step, best_scores = -1.0, None, -1, [], 0, None
     steps = bar(total=cfg.epochs * n_batches, desc="train", unit="batch", enabled=progress)
     for epoch in range(cfg.epochs):
         model.train()
@@ -179,7 +182,7 @@ def fit(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology, mode
         if log_metrics:
             log_metrics({k: v for k, v in row.items() if k != "epoch"}, step)
         if score > best:  # strict, as Lightning's ModelCheckpoint in max mode
-            best, best_epoch = score, epoch
+            best, best_epoch, best_scores = score, epoch, (probs, labels)
             best_state = copy.deepcopy(model.state_dict())
         elif cfg.patience and epoch - best_epoch >= cfg.patience:  # early stopping on the val split
             log.info("early stop after epoch %d: no better val %s for %d epochs", epoch, cfg.select_metric,
@@ -188,4 +191,4 @@ def fit(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology, mode
     steps.close()
     model.load_state_dict(best_state)
     model.eval()
-    return FitResult(model, stats, best_epoch, best, history, time.perf_counter() - start)
+    return FitResult(model, stats, best_epoch, best, history, time.perf_counter() - start, val_scores=best_scores)
