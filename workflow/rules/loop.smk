@@ -46,6 +46,7 @@ rule loop:
         measured=lambda wildcards, input: input.measured[: -len(".npz")],
         out=lambda wildcards, output: Path(output.report).parent,
         hydra=lambda wildcards, output: hydra_dir(output.report),
+    priority: 5  # the longest job of the quick profile (~4 min on one core): it starts beside the calibration
     resources:
         gpu=GPU,
     log:
