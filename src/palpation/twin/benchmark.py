@@ -14,6 +14,7 @@ and then the record says so in its field names: `wall_s_extrapolated`, `extrapol
         --n-envs 500 --out results/bench/twin_resident.json     # the frame-resident kernel (issue 17)
     python -m palpation.twin.benchmark --device cuda:0 --kernel resident --resolutions reference \
         --n-envs 500 --variants tiles onesync packed packed:largest_first atomic   # its variants
+    python -m palpation.twin.benchmark --device cpu --kernel auto --resolutions coarse --n-envs 40   # the CPU's auto
     python -m palpation.twin.benchmark --device cuda:0 --kernel resident --resolutions reference --layered \
         --n-envs 8 32 128 264 --max-frames 40   # the residual loop's layered kernel at its batch sizes
 """
@@ -131,8 +132,9 @@ def main(argv: list[str] | None = None) -> list[dict]:
                         help="frames timed per point at most (default: a full slide; fewer -> extrapolated)")
     parser.add_argument("--budget-s", type=float, default=None,
                         help="time fewer frames so each point takes about this long (extrapolated; slow CPUs)")
-    parser.add_argument("--kernel", choices=["streamed", "resident"], default="streamed",
-                        help="twin.integrator.kernel: the streamed substep kernels or the frame-resident one")
+    parser.add_argument("--kernel", choices=["streamed", "resident", "auto"], default="streamed",
+                        help="twin.integrator.kernel: the streamed substep kernels, the frame-resident one, or auto "
+                             "(on the CPU: resident, one lane in mesh order)")
     parser.add_argument("--block-dim", type=int, nargs="+", default=[TwinConfig().integrator.block_dim],
                         help="threads per env block of the resident kernel (one record each)")
     parser.add_argument("--variants", nargs="+", default=[default_variant()],
