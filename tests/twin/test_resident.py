@@ -1,6 +1,7 @@
 """The frame-resident kernel (twin.integrator.kernel=resident) against the streamed kernels, on the CPU."""
 
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import nullcontext
 
 import numpy as np
 import pytest
@@ -10,7 +11,7 @@ from palpation.twin import resident
 from palpation.twin.agreement import LAYERED, compare_devices
 from palpation.twin.config import TwinConfig
 from palpation.twin.mesh import shell_weights
-from palpation.twin.resident import ResidentLayout, color_tets
+from palpation.twin.resident import CPU_TILES_LOCK, ResidentLayout, color_tets
 from palpation.twin.resident_sync import chunk_table, pack_corners
 from palpation.twin.simulator import BatchedTwin
 
@@ -22,9 +23,10 @@ LAYERED_ENVS = {"shell_ratio": np.array([3.0, 0.5]), "alpha": np.array([0.2, 0.0
 
 
 def _press(mesh, kernel, frames=6, layout=None, block_dim=1, device="cpu", variant="tiles", coloring="mesh_order",
-           layered=False):
+           layered=False, held=()):
     """Two envs pressing 2 mm into the vessel (one without it): positions after each frame.
-    layered: the residual loop's layered elastic kernel with LAYERED_ENVS."""
+    layered: the residual loop's layered elastic kernel with LAYERED_ENVS. held: frames stepped while this thread
+    holds resident.CPU_TILES_LOCK (as another thread's twin would)."""
     cfg = TwinConfig()
     cfg.integrator.kernel, cfg.integrator.block_dim = kernel, block_dim
     cfg.integrator.resident_variant, cfg.integrator.resident_coloring = variant, coloring
@@ -44,7 +46,8 @@ def _press(mesh, kernel, frames=6, layout=None, block_dim=1, device="cpu", varia
     for k in range(frames):
         T = T.copy()
         T[:, 2, 3] -= 0.0005
-        sim.step_frame(T)
+        with CPU_TILES_LOCK if k in held else nullcontext():
+            sim.step_frame(T)
         out.append(sim.positions_world().copy())
     return np.array(out), sim
 
@@ -237,12 +240,24 @@ def test_auto_kernel_on_the_cpu_keeps_the_streamed_bits(mesh, layered, cpu_block
     np.testing.assert_array_equal(sim.contact_forces(), sim_ref.contact_forces())
 
 
-def test_cpu_resident_twins_in_threads(mesh):
+@pytest.mark.parametrize("layered", [False, True])
+def test_auto_cpu_frame_runs_streamed_while_the_tiles_are_taken(mesh, layered):
+    """A CPU frame under auto whose tile lock another thread holds runs the streamed kernels: the same bits, so
+    resident and streamed frames mix freely (frames 1-3 streamed here)."""
+    ref, _ = _press(mesh, "streamed", layered=layered)
+    got, sim = _press(mesh, "auto", layered=layered, held=(1, 2, 3))
+    assert set(sim._graphs) == {True, False}  # both kernels' frames ran
+    np.testing.assert_array_equal(got, ref)
+
+
+@pytest.mark.parametrize("kernel", ["auto", "resident"])
+def test_cpu_resident_twins_in_threads(mesh, kernel):
     """Warp's CPU tile kernels share one static pointer to their tiles: twins stepping side by side in threads
-    (the loop's and the Sim-set writer's workers) take turns (resident.CPU_TILES_LOCK), each with its own bits."""
-    ref, _ = _press(mesh, "auto", frames=4)
+    (the loop's and the Sim-set writer's workers) never run them at once (resident.CPU_TILES_LOCK; under auto a
+    frame that would wait runs streamed), each with its own bits."""
+    ref, _ = _press(mesh, kernel, frames=4)
     with ThreadPoolExecutor(2) as pool:
-        runs = list(pool.map(lambda _: _press(mesh, "auto", frames=4)[0], range(4)))
+        runs = list(pool.map(lambda _: _press(mesh, kernel, frames=4)[0], range(4)))
     for got in runs:
         np.testing.assert_array_equal(got, ref)
 

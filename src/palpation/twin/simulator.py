@@ -10,7 +10,7 @@ nothing: the frame index lives on the device.
 from __future__ import annotations
 
 import logging
-from contextlib import nullcontext
+from contextlib import contextmanager, nullcontext
 
 import numpy as np
 import warp as wp
@@ -25,7 +25,7 @@ from palpation.twin.integrate import (advance_frame, check_nodes, check_tets, in
 from palpation.twin.mesh import (SensorMesh, build_vessel_points, morton_order, per_mesh, projected_node_area,
                                  shell_weights)
 from palpation.twin.resident import CPU_TILES_LOCK, launch_resident, resident_layout
-from palpation.twin.warp_runtime import resolve_device
+from palpation.twin.warp_runtime import CAPTURE_LOCK, resolve_device
 from palpation.twin.parameters import CONTACT_KEYS, ENV_KEYS, LAYERED_KEYS, by_env_key, per_env_keys
 
 log = logging.getLogger(__name__)
@@ -66,7 +66,12 @@ class BatchedTwin:
         th = cfg.material.shell_thickness
         shell = per_mesh(mesh, ("shell", th), lambda: shell_weights(mesh.nodes, mesh.tets, th))
         self.resident = resident_layout(mesh, needs_force, dev, cfg, n, shell)  # None: the streamed kernels
-        self._frame_lock = CPU_TILES_LOCK if self.resident is not None and not dev.is_cuda else nullcontext()
+        # A CPU process runs Warp's tile kernels one thread at a time (resident.CPU_TILES_LOCK). Under kernel=auto
+        # the CPU layout sums in the streamed kernels' order, so a frame whose lock is taken runs streamed instead:
+        # the same bits, and a process's worker threads keep every core
+        self._tiles = self.resident is not None and not dev.is_cuda
+        self._fallback = self._tiles and cfg.integrator.kernel == "auto"
+        self._resident_now = self.resident is not None
         self.tet_order = np.concatenate([moving_ix, np.flatnonzero(~moving)])
         self.n_force_tets = len(moving_ix)
         tets = mesh.tets[self.tet_order]
@@ -126,8 +131,8 @@ class BatchedTwin:
         self._pose = np.tile(np.eye(4), (n, 1, 1))
         self.frame = 0
         self.use_graph = True  # CUDA graphs; CPU graphs replay natively (Warp >= 1.19), 0.2 us a launch
-        self.graph = None
-        self._schedule = self._sched_graph = None
+        self._graphs, self._sched_graphs = {}, {}  # captured frames, by kernel (True: resident)
+        self._schedule = None
         limit = courant_dt(mesh.nodes, mesh.tets, cfg.material.E, cfg.material.nu, cfg.material.rho,
                            cfg.integrator.mass_scale, cfg.material.lame)
         if self.dt > 1.5 * limit:  # measured limits are 1.25-1.5x this estimate (docs/twin.md)
@@ -143,8 +148,7 @@ class BatchedTwin:
         self.contact.seg_a = wp.array(pad[:, 0].astype(np.float32), dtype=wp.vec2, device=self.device)
         self.contact.seg_b = wp.array(pad[:, 1].astype(np.float32), dtype=wp.vec2, device=self.device)
         self.contact.n_seg = len(seg)
-        self.graph = None  # a captured graph holds the old struct
-        self._sched_graph = None
+        self._graphs, self._sched_graphs = {}, {}  # a captured graph holds the old struct
 
     # ---- parameters and state -------------------------------------------------------------
     def set_env_params(self, params: dict[str, np.ndarray]) -> None:
@@ -223,18 +227,10 @@ class BatchedTwin:
         self.pose_t.assign(self._pose[:, :3, 3].astype(np.float32))
         self.delta_R.assign((delta[:, :3, :3] - np.eye(3)).astype(np.float32))
         self.delta_t.assign(delta[:, :3, 3].astype(np.float32))
-        with self._frame_lock:
-            if self.use_graph:
-                if self.graph is None:
-                    with wp.ScopedCapture(device=self.device) as capture:
-                        self._frame()
-                    self.graph = capture.graph
-                wp.capture_launch(self.graph)
-            else:
-                self._frame()
+        self._run_frame(self._graphs, scheduled=False)
         self._pose = T_next
         self.frame += 1
-        self._schedule = self._sched_graph = None  # the schedule's increments start elsewhere now
+        self._schedule, self._sched_graphs = None, {}  # the schedule's increments start elsewhere now
 
     def set_schedule(self, T_BA: np.ndarray, extra=None) -> None:
         """Upload a whole pose schedule (F, n, 4, 4) for `step_scheduled`.
@@ -253,14 +249,14 @@ class BatchedTwin:
         delta = T @ np.linalg.inv(prev)  # world-frame increments, float64
         rows = [prev[..., :3, :3], prev[..., :3, 3], delta[..., :3, :3] - np.eye(3), delta[..., :3, 3]]
         F = len(T)
-        if (self._sched_graph is not None and extra is self._sched_extra and self.frame == self._sched_start
+        if (self._sched_graphs and extra is self._sched_extra and self.frame == self._sched_start
                 and F <= self._sched_arrays[0].shape[0]):  # a reset twin's next schedule (loop.simulate's pool):
             for a, r in zip(self._sched_arrays, rows):  # into the arrays its graph reads, no capture (~0.1 s)
                 a.assign(np.concatenate([r, np.zeros((a.shape[0] - F, *r.shape[1:]))]).astype(np.float32))
         else:
             self._sched_arrays = [wp.array(r.astype(np.float32), dtype=kind, device=self.device)
                                   for r, kind in zip(rows, (wp.mat33, wp.vec3, wp.mat33, wp.vec3))]
-            self._sched_graph = None
+            self._sched_graphs = {}
         self._schedule, self._sched_start, self._sched_next = T, self.frame, 0
         self._sched_extra = extra
 
@@ -269,18 +265,44 @@ class BatchedTwin:
         if self._schedule is None or self._sched_next >= len(self._schedule):
             raise ValueError("step_scheduled needs a schedule with frames left: call set_schedule after "
                              "reset (step_frame and reset discard it)")
-        with self._frame_lock:
-            if self.use_graph:
-                if self._sched_graph is None:
-                    with wp.ScopedCapture(device=self.device) as capture:
-                        self._frame(scheduled=True)
-                    self._sched_graph = capture.graph
-                wp.capture_launch(self._sched_graph)
-            else:
-                self._frame(scheduled=True)
+        self._run_frame(self._sched_graphs, scheduled=True)
         self._pose = self._schedule[self._sched_next]
         self._sched_next += 1
         self.frame += 1
+
+    @contextmanager
+    def _frame_kernel(self):
+        """Yields whether the next frame runs the resident kernel, holding CPU_TILES_LOCK for it on the CPU; under
+        kernel=auto a CPU frame that would wait for the lock runs the streamed kernels instead."""
+        if not self._tiles:
+            yield self.resident is not None
+        elif CPU_TILES_LOCK.acquire(blocking=not self._fallback):
+            try:
+                yield True
+            finally:
+                CPU_TILES_LOCK.release()
+        else:
+            yield False
+
+    def _run_frame(self, graphs: dict, scheduled: bool) -> None:
+        """One frame, replayed from `graphs` (one per kernel that may run it, both under auto on the CPU). They are
+        captured at the first frame under CAPTURE_LOCK (capture is process-wide; it records, runs nothing), before
+        the frame takes the tile lock: the locks are always taken in that order."""
+        if self.use_graph:
+            missing = [k for k in ((True, False) if self._fallback else (self.resident is not None,))
+                       if k not in graphs]
+            with CAPTURE_LOCK if missing else nullcontext():
+                for resident in missing:
+                    self._resident_now = resident
+                    with wp.ScopedCapture(device=self.device) as capture:
+                        self._frame(scheduled)
+                    graphs[resident] = capture.graph
+        with self._frame_kernel() as resident:
+            self._resident_now = resident
+            if self.use_graph:
+                wp.capture_launch(graphs[resident])
+            else:
+                self._frame(scheduled)
 
     def _frame(self, scheduled: bool = False) -> None:
         """One frame as captured: [schedule row ->] poses, physics, [extra,] frame_index += 1, health."""
@@ -308,7 +330,7 @@ class BatchedTwin:
                   inputs=[self.v_ctl, self.fixed, N, int(self.cfg.integrator.zero_velocity_each_frame)],
                   outputs=[self.v])
         self.contact_flag.zero_()
-        if self.resident is not None:  # all substeps in one launch, one block per env
+        if self._resident_now:  # all substeps in one launch, one block per env
             launch_resident(self)
         else:
             for _ in range(self.substeps):

@@ -20,8 +20,9 @@ import warp as wp
 log = logging.getLogger(__name__)
 # Warp's CPU graph capture is process-wide state: threads that each run a twin (loop.simulate, apps.simulate)
 # build, capture, read and free their twins under this lock and replay their graphs outside it (Warp replays a
-# CPU graph natively, without Python's lock, one core per thread); twin.runner.LockedBatch keeps that protocol
-CAPTURE_LOCK = threading.Lock()
+# CPU graph natively, without Python's lock, one core per thread); twin.runner.LockedBatch keeps that protocol.
+# Reentrant: a twin also takes it for its own captures (BatchedTwin._run_frame), inside LockedBatch or not
+CAPTURE_LOCK = threading.RLock()
 
 
 def usable_cores() -> int:
