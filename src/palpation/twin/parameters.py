@@ -10,7 +10,8 @@ An entry's value is in its `unit`; the config field holds value * scale (only th
 mm, and the reference-unit aliases scale). Defaults are never restated: `default(cfg)` reads the
 config field. Bounds are the physical search range (the loop searches and clips within them, a
 calibration takes them where its config leaves a range out and warns when its range leaves them), not
-validity limits: the simulator itself refuses non-physical values.
+validity limits: the simulator itself refuses non-physical values (`env_values`, `layered_values` check the per-env
+arrays it takes).
 
 scope: "env"      per env in every twin (a BatchedTwin array, read by the force kernels);
        "layered"  per env only with the layered elastic kernel (twin.layered), else the config's value;
@@ -23,6 +24,8 @@ needs: what must be on for the parameter to act: "vessel" (the per-env vessel sw
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+
+import numpy as np
 
 from palpation import paper
 
@@ -183,6 +186,36 @@ def by_env_key(key: str) -> TwinParameter:
             return p
     raise ValueError(f"'{key}' is not a per-env twin parameter; use one of {per_env_keys()} "
                      "(palpation.twin.parameters)")
+
+
+def env_values(key: str, value, n_envs: int) -> np.ndarray:
+    """One env key's values for `n_envs` envs (a scalar broadcast), float64; finite, else a ValueError."""
+    a = np.asarray(value, np.float64)
+    if a.ndim > 1 or a.size not in (1, n_envs):
+        raise ValueError(f"env parameter {key}: need a scalar or {n_envs} values, got shape {a.shape}")
+    a = np.broadcast_to(a.reshape(-1), (n_envs,))
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"env parameter {key}: values must be finite, got {a}")
+    return a
+
+
+def layered_values(params: dict, cfg, n_envs: int) -> dict[str, np.ndarray]:
+    """Scope "layered" parameters per env (`params` or the config's); without the layered kernel (cfg.layered)
+    only the config's values are allowed."""
+    out = {}
+    for key in LAYERED_KEYS:
+        default = by_env_key(key).default(cfg)
+        a = np.asarray(params.get(key, default), np.float64).reshape(-1)
+        if a.size not in (1, n_envs) or not np.all(np.isfinite(a)) or np.any(a < 0):
+            raise ValueError(f"env parameter {key}: need one finite value >= 0 or {n_envs} "
+                             f"of them, got {a}")
+        if not cfg.layered and np.any(a != default):
+            raise ValueError(f"env parameter {key} differs from the config, which needs the layered "
+                             "kernel: set twin.damping.per_env=true or twin.material.shell_thickness > 0")
+        out[key] = np.broadcast_to(a, (n_envs,))
+    if np.any(out["shell_ratio"] <= 0):
+        raise ValueError(f"env parameter shell_ratio must be > 0, got {out['shell_ratio']}")
+    return out
 
 
 def outside_bounds(name: str, low: float, high: float) -> str:

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import functools
 import threading
+from contextlib import contextmanager
+from typing import Iterator
 
 import numpy as np
 import warp as wp
@@ -278,6 +280,33 @@ def launch_resident(sim) -> None:
                     inputs=[*consts, sim.inv_mass, sim.fixed, sim.on_surface, sim.env_mu, sim.env_lam,
                             d.alpha, d.beta, sim.dt, sim.substeps, sim.contact, sim.v_ctl],
                     outputs=[sim.x, sim.v, sim.f_c, sim.contact_flag, *lay.extra_args(sim)])
+
+
+def _cpu_auto(sim) -> bool:
+    """Whether `sim` runs the CPU's auto layout (one lane in mesh order: the streamed kernels' bits)."""
+    return sim.resident is not None and not sim.device.is_cuda and sim.cfg.integrator.kernel == "auto"
+
+
+def frame_kernels(sim) -> tuple[bool, ...]:
+    """The kernels that may run a frame of `sim` (True: resident): both under auto on the CPU (frame_kernel's
+    fallback), else the one it was built for."""
+    return (True, False) if _cpu_auto(sim) else (sim.resident is not None,)
+
+
+@contextmanager
+def frame_kernel(sim) -> Iterator[bool]:
+    """Yields whether the next frame of `sim` runs the resident kernel, holding CPU_TILES_LOCK for it on the CPU.
+    Under auto a CPU frame that would wait for the lock runs the streamed kernels instead: the same bits, and a
+    process's worker threads keep every core."""
+    if sim.resident is None or sim.device.is_cuda:
+        yield sim.resident is not None
+    elif CPU_TILES_LOCK.acquire(blocking=not _cpu_auto(sim)):
+        try:
+            yield True
+        finally:
+            CPU_TILES_LOCK.release()
+    else:
+        yield False
 
 
 def resident_shared_bytes(variant: str, n_nodes: int, n_force: int) -> int:

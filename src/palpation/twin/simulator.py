@@ -10,7 +10,7 @@ nothing: the frame index lives on the device.
 from __future__ import annotations
 
 import logging
-from contextlib import contextmanager, nullcontext
+from contextlib import nullcontext
 
 import numpy as np
 import warp as wp
@@ -24,9 +24,10 @@ from palpation.twin.integrate import (advance_frame, check_nodes, check_tets, in
                                       set_control_velocity, snap_fixed_nodes)
 from palpation.twin.mesh import (SensorMesh, build_vessel_points, morton_order, per_mesh, projected_node_area,
                                  shell_weights)
-from palpation.twin.resident import CPU_TILES_LOCK, launch_resident, resident_layout
+from palpation.twin.resident import frame_kernel, frame_kernels, launch_resident, resident_layout
 from palpation.twin.warp_runtime import CAPTURE_LOCK, resolve_device
-from palpation.twin.parameters import CONTACT_KEYS, ENV_KEYS, LAYERED_KEYS, by_env_key, per_env_keys
+from palpation.twin.parameters import (CONTACT_KEYS, ENV_KEYS, LAYERED_KEYS, by_env_key, env_values, layered_values,
+                                       per_env_keys)
 
 log = logging.getLogger(__name__)
 
@@ -66,12 +67,7 @@ class BatchedTwin:
         th = cfg.material.shell_thickness
         shell = per_mesh(mesh, ("shell", th), lambda: shell_weights(mesh.nodes, mesh.tets, th))
         self.resident = resident_layout(mesh, needs_force, dev, cfg, n, shell)  # None: the streamed kernels
-        # A CPU process runs Warp's tile kernels one thread at a time (resident.CPU_TILES_LOCK). Under kernel=auto
-        # the CPU layout sums in the streamed kernels' order, so a frame whose lock is taken runs streamed instead:
-        # the same bits, and a process's worker threads keep every core
-        self._tiles = self.resident is not None and not dev.is_cuda
-        self._fallback = self._tiles and cfg.integrator.kernel == "auto"
-        self._resident_now = self.resident is not None
+        self._resident_now = self.resident is not None  # the kernel of the frame being run (resident.frame_kernel)
         self.tet_order = np.concatenate([moving_ix, np.flatnonzero(~moving)])
         self.n_force_tets = len(moving_ix)
         tets = mesh.tets[self.tet_order]
@@ -162,12 +158,12 @@ class BatchedTwin:
         cfg, m = self.cfg, self.cfg.material
         vals = {}
         for key in ENV_KEYS:
-            vals[key] = self._env_values(key, params.get(key, by_env_key(key).default(cfg)))
-        vals["vessel"] = self._env_values("vessel", params.get("vessel", float(cfg.contact.vessel)))
+            vals[key] = env_values(key, params.get(key, by_env_key(key).default(cfg)), self.n_envs)
+        vals["vessel"] = env_values("vessel", params.get("vessel", float(cfg.contact.vessel)), self.n_envs)
         if np.any(vals["E"] <= 0) or np.any((vals["nu"] <= 0) | (vals["nu"] >= 0.5)):
             raise ValueError(f"env parameters: need E > 0 and 0 < nu < 0.5, got E={vals['E']}, "
                              f"nu={vals['nu']}")
-        extras = self._layered_params(params)
+        extras = layered_values(params, cfg, self.n_envs)
         mu, lam = lame_parameters(vals["E"], vals["nu"], m.lame)
         self.env_mu.assign(mu.astype(np.float32))
         self.env_lam.assign(lam.astype(np.float32))
@@ -179,32 +175,6 @@ class BatchedTwin:
                 getattr(self, f"env_{key}").assign(values.astype(np.float32))
             vals.update(extras)
         self.env_params = vals
-
-    def _env_values(self, key: str, value) -> np.ndarray:
-        a = np.asarray(value, np.float64)
-        if a.ndim > 1 or a.size not in (1, self.n_envs):
-            raise ValueError(f"env parameter {key}: need a scalar or {self.n_envs} values, got shape {a.shape}")
-        a = np.broadcast_to(a.reshape(-1), (self.n_envs,))
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"env parameter {key}: values must be finite, got {a}")
-        return a
-
-    def _layered_params(self, params: dict) -> dict[str, np.ndarray]:
-        """Scope "layered" parameters per env; without the layered kernel only the config's values are allowed."""
-        out = {}
-        for key in LAYERED_KEYS:
-            default = by_env_key(key).default(self.cfg)
-            a = np.asarray(params.get(key, default), np.float64).reshape(-1)
-            if a.size not in (1, self.n_envs) or not np.all(np.isfinite(a)) or np.any(a < 0):
-                raise ValueError(f"env parameter {key}: need one finite value >= 0 or {self.n_envs} "
-                                 f"of them, got {a}")
-            if not self.cfg.layered and np.any(a != default):
-                raise ValueError(f"env parameter {key} differs from the config, which needs the layered "
-                                 "kernel: set twin.damping.per_env=true or twin.material.shell_thickness > 0")
-            out[key] = np.broadcast_to(a, (self.n_envs,))
-        if np.any(out["shell_ratio"] <= 0):
-            raise ValueError(f"env parameter shell_ratio must be > 0, got {out['shell_ratio']}")
-        return out
 
     def reset(self, T_BA: np.ndarray) -> None:
         """Pose every env rigidly (undeformed, at rest); clears contact and failure flags."""
@@ -270,34 +240,19 @@ class BatchedTwin:
         self._sched_next += 1
         self.frame += 1
 
-    @contextmanager
-    def _frame_kernel(self):
-        """Yields whether the next frame runs the resident kernel, holding CPU_TILES_LOCK for it on the CPU; under
-        kernel=auto a CPU frame that would wait for the lock runs the streamed kernels instead."""
-        if not self._tiles:
-            yield self.resident is not None
-        elif CPU_TILES_LOCK.acquire(blocking=not self._fallback):
-            try:
-                yield True
-            finally:
-                CPU_TILES_LOCK.release()
-        else:
-            yield False
-
     def _run_frame(self, graphs: dict, scheduled: bool) -> None:
-        """One frame, replayed from `graphs` (one per kernel that may run it, both under auto on the CPU). They are
+        """One frame, replayed from `graphs` (one per kernel that may run it, resident.frame_kernels). They are
         captured at the first frame under CAPTURE_LOCK (capture is process-wide; it records, runs nothing), before
         the frame takes the tile lock: the locks are always taken in that order."""
         if self.use_graph:
-            missing = [k for k in ((True, False) if self._fallback else (self.resident is not None,))
-                       if k not in graphs]
+            missing = [k for k in frame_kernels(self) if k not in graphs]
             with CAPTURE_LOCK if missing else nullcontext():
                 for resident in missing:
                     self._resident_now = resident
                     with wp.ScopedCapture(device=self.device) as capture:
                         self._frame(scheduled)
                     graphs[resident] = capture.graph
-        with self._frame_kernel() as resident:
+        with frame_kernel(self) as resident:
             self._resident_now = resident
             if self.use_graph:
                 wp.capture_launch(graphs[resident])

@@ -29,7 +29,7 @@ def usable_cores() -> int:
     """Cores this process may run on (its affinity where the OS has one): the CPU twin's threads. At most
     OMP_NUM_THREADS where set: Snakemake sets it to a job's `threads:`, so the jobs running side by side do not
     oversubscribe the cores (a second twin thread in a one-thread job only ran frames the other core's job
-    needed, on the slower streamed kernels: BatchedTwin._frame_kernel)."""
+    needed, on the slower streamed kernels: resident.frame_kernel)."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     omp = os.environ.get("OMP_NUM_THREADS", "")
     return min(cores, int(omp)) if omp.isdigit() and int(omp) > 0 else cores
