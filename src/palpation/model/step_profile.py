@@ -1,10 +1,11 @@
 """Where one training step's time goes on this machine's CPU (issue 17: the quick profile's floor).
 
-Times the step `train.fit` runs (forward, focal loss, backward, Adam) of one configuration's model on real
-training batches, and lets torch's profiler split it by operator. Beside it, two rates of the same machine
-and thread count: the matrix product of the model's widest layer (the edge encoders' second Linear, one row
-per edge) in GFLOP/s, and the dropout mask of the largest dropout input (`bernoulli_`, one double draw per
-element) against a uniform float draw of the same size. `--compile` also times the step under torch.compile.
+Times the step `train.fit` runs (`train.train_step`: forward, focal loss, backward, Adam) of one
+configuration's model on real training batches, and lets torch's profiler split it by operator. Beside it, two
+rates of the same machine and thread count: the matrix product of the model's widest layer (the edge encoders'
+second Linear, one row per edge) in GFLOP/s, and the dropout mask of the largest dropout input (`bernoulli_`,
+one double draw per element) against a uniform float draw of the same size. `--compile` also times the step
+under torch.compile.
 
     python -m palpation.model.step_profile --configs A-to-A:large C-to-B:compact --override train.batch_size=4 \
         --compile --out docs/results/bench_train_step_cpu.json      # the quick profile's two kinds of training run
@@ -30,7 +31,7 @@ from palpation.io import save_json
 from palpation.model.benchmark import compose_job
 from palpation.model.job import load_job_data
 from palpation.model.stgnn import STGNN
-from palpation.model.train import focal_loss, norm_stats, param_groups, seed_everything, training_batch
+from palpation.model.train import norm_stats, param_groups, seed_everything, train_step, training_batch
 from palpation.tracking import git_commit
 
 log = logging.getLogger(__name__)
@@ -48,7 +49,8 @@ def _ms(fn, repeats: int) -> float:
 
 
 def training_batches(job, n: int) -> tuple[list, object]:
-    """`n` augmented training batches drawn as `fit` draws them (seed 0), and the normalisation statistics."""
+    """`n` training batches of random clips, augmented as `fit` augments them (seed 0), and the normalisation
+    statistics `fit` would draw first."""
     d = load_job_data(job)
     seed_everything(0)
     rng = np.random.default_rng(0)
@@ -70,11 +72,7 @@ def step_timer(job, batches: list, topo, stats, compiled: bool = False):
     turn = itertools.cycle(batches)
 
     def step():
-        b = next(turn)
-        loss = focal_loss(forward(b), b.y, stats.alpha, job.train.focal_gamma)
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
+        train_step(forward, opt, next(turn), stats.alpha, job.train.focal_gamma)
     return step, model
 
 

@@ -56,6 +56,16 @@ def focal_loss(logits: torch.Tensor, targets: torch.Tensor, alpha: float, gamma:
     return (alpha_t * (1 - p_t) ** gamma * bce).mean()
 
 
+def train_step(model: torch.nn.Module, opt: torch.optim.Optimizer, batch, alpha: float,
+               gamma: float) -> torch.Tensor:
+    """One optimisation step of `fit`: focal loss over every frame's marker nodes, backward, Adam; the loss."""
+    loss = focal_loss(model(batch), batch.y, alpha, gamma)
+    opt.zero_grad()
+    loss.backward()
+    opt.step()
+    return loss
+
+
 def grouped_parameters(named, weight_decay: float) -> list[dict]:
     """Weight decay on everything except parameters whose name contains 'bias' or 'bn'."""
     decay, no_decay = [], []
@@ -162,10 +172,7 @@ def fit(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology, mode
             idx = order[b * cfg.batch_size:(b + 1) * cfg.batch_size]
             m, lab = training_batch(train, idx, cfg, rng)
             batch = make_batch(m, lab, rest, topo, stats, cfg.device)
-            loss = focal_loss(model(batch), batch.y, stats.alpha, cfg.focal_gamma)  # every frame
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
+            loss = train_step(model, opt, batch, stats.alpha, cfg.focal_gamma)
             losses.append(loss.item())
             step += 1
             if log_metrics:
