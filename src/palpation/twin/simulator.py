@@ -25,7 +25,7 @@ from palpation.twin.integrate import (advance_frame, check_nodes, check_tets, in
 from palpation.twin.mesh import (SensorMesh, build_vessel_points, morton_order, per_mesh, projected_node_area,
                                  shell_weights)
 from palpation.twin.resident import frame_kernel, frame_kernels, launch_resident, resident_layout
-from palpation.twin.warp_runtime import CAPTURE_LOCK, resolve_device
+from palpation.twin.warp_runtime import CAPTURE_LOCK, resolve_device, warp_exclusive
 from palpation.twin.parameters import (CONTACT_KEYS, ENV_KEYS, LAYERED_KEYS, by_env_key, env_values, layered_values,
                                        per_env_keys)
 
@@ -33,6 +33,7 @@ log = logging.getLogger(__name__)
 
 
 class BatchedTwin:
+    @warp_exclusive
     def __init__(self, mesh: SensorMesh, n_envs: int, cfg: TwinConfig | None = None,
                  env_params: dict[str, np.ndarray] | None = None, device: str | None = None):
         self.cfg = cfg = (cfg or TwinConfig()).validate()
@@ -135,6 +136,7 @@ class BatchedTwin:
             log.warning("dt=%.3g s is over 1.5x the Courant estimate %.3g s of this mesh: expect "
                         "divergence", self.dt, limit)
 
+    @warp_exclusive
     def set_inclusions(self, segments_m: np.ndarray) -> None:
         """Vessel centreline segments (S, 2, 2) world x, y metres of the compliant phantom (twin.contact)."""
         seg = np.asarray(segments_m, np.float64).reshape(-1, 2, 2)
@@ -147,6 +149,7 @@ class BatchedTwin:
         self._graphs, self._sched_graphs = {}, {}  # a captured graph holds the old struct
 
     # ---- parameters and state -------------------------------------------------------------
+    @warp_exclusive
     def set_env_params(self, params: dict[str, np.ndarray]) -> None:
         """Per-env values of the registry's parameters (twin.parameters; scalars broadcast) and the
         vessel switch; a key left out takes the config's value. Scope "layered" keys (alpha,
@@ -176,6 +179,7 @@ class BatchedTwin:
             vals.update(extras)
         self.env_params = vals
 
+    @warp_exclusive
     def reset(self, T_BA: np.ndarray) -> None:
         """Pose every env rigidly (undeformed, at rest); clears contact and failure flags."""
         T = self._check_poses(T_BA)
@@ -193,15 +197,17 @@ class BatchedTwin:
         """Advance one frame while the fixed nodes move rigidly from the current to the next pose."""
         T_next = self._check_poses(T_BA_next)
         delta = T_next @ np.linalg.inv(self._pose)  # world-frame increment, float64
-        self.pose_R.assign(self._pose[:, :3, :3].astype(np.float32))
-        self.pose_t.assign(self._pose[:, :3, 3].astype(np.float32))
-        self.delta_R.assign((delta[:, :3, :3] - np.eye(3)).astype(np.float32))
-        self.delta_t.assign(delta[:, :3, 3].astype(np.float32))
+        with CAPTURE_LOCK:  # the copies, not the replay (warp_runtime.CAPTURE_LOCK)
+            self.pose_R.assign(self._pose[:, :3, :3].astype(np.float32))
+            self.pose_t.assign(self._pose[:, :3, 3].astype(np.float32))
+            self.delta_R.assign((delta[:, :3, :3] - np.eye(3)).astype(np.float32))
+            self.delta_t.assign(delta[:, :3, 3].astype(np.float32))
         self._run_frame(self._graphs, scheduled=False)
         self._pose = T_next
         self.frame += 1
         self._schedule, self._sched_graphs = None, {}  # the schedule's increments start elsewhere now
 
+    @warp_exclusive
     def set_schedule(self, T_BA: np.ndarray, extra=None) -> None:
         """Upload a whole pose schedule (F, n, 4, 4) for `step_scheduled`.
 
@@ -244,20 +250,21 @@ class BatchedTwin:
         """One frame, replayed from `graphs` (one per kernel that may run it, resident.frame_kernels). They are
         captured at the first frame under CAPTURE_LOCK (capture is process-wide; it records, runs nothing), before
         the frame takes the tile lock: the locks are always taken in that order."""
-        if self.use_graph:
-            missing = [k for k in frame_kernels(self) if k not in graphs]
-            with CAPTURE_LOCK if missing else nullcontext():
-                for resident in missing:
-                    self._resident_now = resident
-                    with wp.ScopedCapture(device=self.device) as capture:
-                        self._frame(scheduled)
-                    graphs[resident] = capture.graph
+        if not self.use_graph:  # every launch a Warp call: all under the lock
+            with CAPTURE_LOCK, frame_kernel(self) as resident:
+                self._resident_now = resident
+                self._frame(scheduled)
+            return
+        missing = [k for k in frame_kernels(self) if k not in graphs]
+        with CAPTURE_LOCK if missing else nullcontext():
+            for resident in missing:
+                self._resident_now = resident
+                with wp.ScopedCapture(device=self.device) as capture:
+                    self._frame(scheduled)
+                graphs[resident] = capture.graph
         with frame_kernel(self) as resident:
             self._resident_now = resident
-            if self.use_graph:
-                wp.capture_launch(graphs[resident])
-            else:
-                self._frame(scheduled)
+            wp.capture_launch(graphs[resident])  # the one Warp call a twin makes outside CAPTURE_LOCK
 
     def _frame(self, scheduled: bool = False) -> None:
         """One frame as captured: [schedule row ->] poses, physics, [extra,] frame_index += 1, health."""
@@ -273,6 +280,7 @@ class BatchedTwin:
         wp.launch(advance_frame, dim=1, device=dev, inputs=[self.frame_index])
         self._launch_health(self.cfg.health.check_every)
 
+    @warp_exclusive
     def simulate(self) -> None:
         """One frame: control velocities, velocity reset, substeps, fixed nodes onto the pose.
 
@@ -292,6 +300,7 @@ class BatchedTwin:
                 self.substep()
         wp.launch(snap_fixed_nodes, dim=n * N, device=dev, inputs=[self.x_u, self.fixed, N], outputs=[self.x])
 
+    @warp_exclusive
     def substep(self) -> None:
         n, N, dev, d = self.n_envs, self.n_nodes, self.device, self.cfg.damping
         T = self.n_force_tets  # the tets that move come first in self.tets (see __init__)
@@ -330,6 +339,7 @@ class BatchedTwin:
                   inputs=[self.f, self.f_c, self.v_ctl, self.inv_mass, self.fixed, N, self.dt],
                   outputs=[self.x, self.v])
 
+    @warp_exclusive
     def check_health(self) -> None:
         """Flag envs with a non-finite or runaway node, or an inverted tet (SPEC §2.4)."""
         self._launch_health(1)
@@ -345,25 +355,31 @@ class BatchedTwin:
                   outputs=[self.failed_flag])
 
     # ---- readers (each one device-to-host copy) -------------------------------------------
+    @warp_exclusive
     def positions_world(self) -> np.ndarray:
         """Deformed node positions (n, N, 3) float32, metres, world frame A."""
         return self.x.numpy().reshape(self.n_envs, self.n_nodes, 3)
 
+    @warp_exclusive
     def undeformed_world(self) -> np.ndarray:
         """The kinematic rigid copy at the current pose (n, N, 3) float32."""
         return self.x_u.numpy().reshape(self.n_envs, self.n_nodes, 3)
 
+    @warp_exclusive
     def velocities_world(self) -> np.ndarray:
         return self.v.numpy().reshape(self.n_envs, self.n_nodes, 3)
 
+    @warp_exclusive
     def contact_forces(self) -> np.ndarray:
         """Contact force on every node at the last substep (n, N, 3), newtons."""
         return self.f_c.numpy().reshape(self.n_envs, self.n_nodes, 3)
 
+    @warp_exclusive
     def contact_flags(self) -> np.ndarray:
         """Per env: did any surface node touch the vessel during the last frame."""
         return self.contact_flag.numpy().astype(bool)
 
+    @warp_exclusive
     def failed(self) -> np.ndarray:
         """Per env: diverged or inverted since the last reset (sticky)."""
         return self.failed_flag.numpy().astype(bool)

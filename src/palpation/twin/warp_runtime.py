@@ -18,11 +18,25 @@ from concurrent.futures import ThreadPoolExecutor
 import warp as wp
 
 log = logging.getLogger(__name__)
-# Warp's CPU graph capture is process-wide state: threads that each run a twin (loop.simulate, apps.simulate)
-# build, capture, read and free their twins under this lock and replay their graphs outside it (Warp replays a
-# CPU graph natively, without Python's lock, one core per thread); twin.runner.LockedBatch keeps that protocol.
-# Reentrant: a twin also takes it for its own captures (BatchedTwin._run_frame), inside LockedBatch or not
+# Warp's graph capture is process-wide state: one global (runtime._apic_capture in Warp 1.19) that every launch,
+# copy, zero_ and allocation consults. A Warp call of one thread while another thread captures is recorded into
+# that thread's graph (and replayed with it), or dies when the capture ends between the call's check and its use
+# (wp.copy: 'NoneType' has no attribute 'track_array'). So every Warp call of a twin holds this lock: BatchedTwin
+# takes it in each of its methods (warp_exclusive), and only the replay of a captured graph runs outside it (Warp
+# replays a CPU graph natively, without Python's lock, one core per thread). Reentrant: LockedBatch holds it
+# around a twin's whole setup and reads. thread_stress.CaptureWitness counts calls that break the rule.
 CAPTURE_LOCK = threading.RLock()
+
+
+def warp_exclusive(method):
+    """`method` run under CAPTURE_LOCK: for every method that makes Warp calls other than replaying a graph."""
+
+    @functools.wraps(method)
+    def locked(*args, **kwargs):
+        with CAPTURE_LOCK:
+            return method(*args, **kwargs)
+
+    return locked
 
 
 def usable_cores() -> int:
