@@ -73,7 +73,13 @@ CPU_ONLY_WARNING = b"Could not find or load the NVIDIA CUDA driver"
 
 @functools.cache
 def init_warp() -> None:
-    """`wp.init()` once, minus the CPU-only driver warning (Warp's banner and any other message stay)."""
+    """`wp.init()` once, minus the CPU-only driver warning (Warp's banner and any other message stay).
+
+    PALPATION_WARP_CPU_FLAGS, where set, replaces Warp's CPU compiler flags (default "-march=native ..."): ""
+    compiles the CPU kernels for a generic x86-64, as another host's CPU would round (the reproducibility
+    contract's cross-host check, docs/DEVELOPING.md)."""
+    if "PALPATION_WARP_CPU_FLAGS" in os.environ:
+        wp.config.cpu_compiler_flags = os.environ["PALPATION_WARP_CPU_FLAGS"]
     sys.stderr.flush()
     saved = os.dup(2)
     with tempfile.TemporaryFile() as captured:
