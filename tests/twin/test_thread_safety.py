@@ -3,7 +3,8 @@
 Warp's capture state is one process-wide global: a launch, copy or zero_ of one thread during another thread's
 capture is recorded into that graph, or crashes when the capture ends between its check and its use. That crash
 was rare (once in three runs of the twin tests), the recording silent; CaptureWitness counts every such call,
-and with threads switching every 10 us the code before the fix made ~50 of them in every threaded run here.
+and with threads switching every 10 us the code before the fix made 45-158 of them in every threaded twin run here
+(the Sim-set writer's and the loop's paths, through LockedBatch, made none then either: kept as regression tests).
 `python -m palpation.twin.thread_stress --runs 300` is the long version.
 """
 
