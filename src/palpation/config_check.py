@@ -9,9 +9,14 @@ section passes it on to a dataclass constructor (a raw TypeError). So an app's c
 The message names the key, the app and a close existing key (difflib). This works with or without
 structured configs: the second rule needs only the composed YAML.
 
-`app_main(name)` wraps a Hydra main: it runs the check and the MLflow store check
-(`tracking.check_store`) first, and turns the project's one-line errors (ValueError, OSError) into
-exit status 1 with that line on stderr. `PALPATION_TRACEBACK=1` shows the traceback instead.
+Renamed keys (`RENAMED`: `tracking`, now `track`, the MLflow switch of every app) are refused with the
+new name. Hydra itself refuses `tracking=false` (no `+`) before any app code runs, in several lines, so a
+program run (`python -m palpation.apps.<app>`) also checks its command line for them first.
+
+`app_main(name, ranges)` wraps a Hydra main: it runs the key check, the range check of every numeric or
+list setting (`config_ranges.check_ranges`: the structured fields' rules and the app's `ranges` table) and
+the MLflow store check (`tracking.check_store`) first, and turns the project's one-line errors (ValueError,
+OSError) into exit status 1 with that line on stderr. `PALPATION_TRACEBACK=1` shows the traceback instead.
 """
 
 from __future__ import annotations
@@ -20,13 +25,42 @@ import dataclasses
 import difflib
 import functools
 import os
-from typing import Any, Callable
+import re
+import sys
+from typing import Any, Callable, Mapping
 
 from omegaconf import DictConfig, OmegaConf
 
 
 class ConfigKeyError(ValueError):
     """An app's config holds a key the app does not read."""
+
+
+RENAMED = {"tracking": "track"}  # old key -> its one name now (apps had both for the MLflow switch)
+
+
+def renamed(key: str, app: str, has_new: bool, text: str | None = None) -> str | None:
+    """The message for a renamed key, or None when `key` was never renamed."""
+    if key not in RENAMED:
+        return None
+    new = RENAMED[key]
+    origin = f" (from the override '{text}')" if text else ""
+    if has_new:
+        value = text.partition("=")[2] if text and "=" in text else "true or false"
+        return f"config key '{key}'{origin} was renamed '{new}' for palpation.apps.{app}: use {new}={value}"
+    return (f"config key '{key}'{origin} is not a setting of palpation.apps.{app}, which logs nothing to MLflow "
+            f"(the switch is called '{new}' where an app has one); drop it")
+
+
+def check_argv(app: str, argv: list[str]) -> None:
+    """Refuse a renamed key on a command line before Hydra parses it (`tracking=false`, `+tracking=1`, ...)."""
+    from palpation.paths import REPO_ROOT
+
+    for text in argv:
+        key = re.match(r"^[+~]{0,2}([\w.-]+)(=|$)", text)
+        if key and key.group(1) in RENAMED:
+            own = OmegaConf.load(REPO_ROOT / "conf" / f"{app}.yaml")
+            raise ConfigKeyError(renamed(key.group(1), app, RENAMED[key.group(1)] in own, text))
 
 
 def dotted_keys(node: Any, prefix: str = "") -> list[str]:
@@ -112,6 +146,9 @@ def check_config(cfg: DictConfig, app: str) -> None:
     if not unknown:
         return
     key, text = unknown[0]
+    moved = renamed(key, app, key in RENAMED and RENAMED[key] in cfg, text)
+    if moved:
+        raise ConfigKeyError(moved)
     names = [k for k in dotted_keys(cfg) if k not in {u for u, _ in unknown} and k != "hydra"
              and not k.startswith("hydra.")]
     hint = suggest(key, names)
@@ -121,25 +158,39 @@ def check_config(cfg: DictConfig, app: str) -> None:
                          f"an existing key (python -m palpation.apps.{app} --cfg job lists them)")
 
 
-def app_main(app: str) -> Callable:
-    """Decorator for an app's Hydra main (placed under @hydra.main): checks first, errors as one line."""
+def _one_line(app: str, check: Callable, *args):
+    """Run `check`; a ValueError/OSError becomes SystemExit with `<app>: error: <message>`."""
+    try:
+        return check(*args)
+    except (ValueError, OSError) as exc:
+        if os.environ.get("PALPATION_TRACEBACK"):
+            raise
+        raise SystemExit(f"{app}: error: {exc}") from None
+
+
+def app_main(app: str, ranges: Mapping | None = None) -> Callable:
+    """Decorator for an app's Hydra main (placed under @hydra.main): checks first, errors as one line.
+    `ranges`: the app's table of plain YAML settings (config_ranges)."""
     def wrap(main: Callable) -> Callable:
+        if main.__module__ == "__main__":  # run as a program: its command line, before Hydra reads it
+            _one_line(app, check_argv, app, sys.argv[1:])
+
+        def checks(cfg: DictConfig):
+            from palpation.config_ranges import check_ranges
+            from palpation.tracking import mark_work_start
+
+            mark_work_start()
+            check_config(cfg, app)
+            check_ranges(cfg, app, ranges)
+            if cfg.get("track", False):
+                from palpation.tracking import check_store
+
+                check_store()
+            return main(cfg)
+
         @functools.wraps(main)
         def checked(cfg: DictConfig):
-            try:
-                from palpation.tracking import mark_work_start
-
-                mark_work_start()
-                check_config(cfg, app)
-                if cfg.get("track", cfg.get("tracking", False)):
-                    from palpation.tracking import check_store
-
-                    check_store()
-                return main(cfg)
-            except (ValueError, OSError) as exc:
-                if os.environ.get("PALPATION_TRACEBACK"):
-                    raise
-                raise SystemExit(f"{app}: error: {exc}") from None
+            return _one_line(app, checks, cfg)
         return checked
     return wrap
 

@@ -94,14 +94,14 @@ def test_seeds_together_write_one_folder_and_one_mlflow_run_per_seed(train_sets,
 
 @pytest.mark.parametrize("seeds", ["[]", "[1,1]"])
 def test_seeds_together_refuse_an_empty_or_repeated_list(seeds, tmp_path):
-    cfg = compose_train(["experiment=C-to-B", f"seeds={seeds}", "tracking=false"])
+    cfg = compose_train(["experiment=C-to-B", f"seeds={seeds}", "track=false"])
     with pytest.raises(ValueError, match=r"list distinct seeds, at least one \(or seeds=null"):
         run(cfg, tmp_path)
 
 def test_multirun_seeds_and_clip_lens(train_sets, tmp_path):
     paths = [f"data.{k}={v}" for k, v in train_sets.items()]
     cmd = [sys.executable, "-m", "palpation.apps.train", "--multirun", "experiment=C-to-B", "seed=0,1",
-           "clip_len=1,3", "tracking=false", *TINY, *paths, f"hydra.sweep.dir={tmp_path}"]
+           "clip_len=1,3", "track=false", *TINY, *paths, f"hydra.sweep.dir={tmp_path}"]
     env = {**os.environ, "PALPATION_RESULTS": str(tmp_path / "results")}
     proc = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
@@ -153,7 +153,7 @@ def test_choice_keys_are_typed_by_the_schema():
 
 ROBUST_TINY = ["recipe=robust", "model=compact", "clip_len=2", "graph.rest=ideal", "train.batch_size=4",
                "train.epochs=3", "train.train_batches=2", "train.val_batches=null", "recipe.patience=1",
-               "tracking=false"]
+               "track=false"]
 
 
 def test_robust_seeds_together_and_shared_test_sets_match_separate_runs(train_sets, tmp_path):
@@ -216,7 +216,7 @@ def test_one_seed_scored_on_several_test_sets_is_byte_for_byte_its_own_runs(trai
     assert sorted(r.data.tags["config"] for r in runs) == ["A-to-A", "A-to-B", "A-to-C"]
     losses = [[m.value for m in mlflow.MlflowClient().get_metric_history(r.info.run_id, "train/loss")] for r in runs]
     assert losses[0] and losses[0] == losses[1] == losses[2]
-    tiny.append("tracking=false")
+    tiny.append("track=false")
     assert [m["config"] for m in shared] == ["A-to-A", "A-to-B", "A-to-C"]
     assert shared[2]["trained_together"]["configs"] == ["A-to-A", "A-to-B", "A-to-C"]
     timing = ("train_seconds", "test_seconds", "trained_together")
@@ -233,11 +233,11 @@ def test_one_seed_scored_on_several_test_sets_is_byte_for_byte_its_own_runs(trai
 
 def test_also_test_needs_the_run_layout(train_sets, tmp_path):
     with pytest.raises(ValueError, match="also_uncalibrated uses the models of `seeds`"):
-        run(compose_train(["experiment=A-to-B", "also_uncalibrated=x", "tracking=false"]), tmp_path)
+        run(compose_train(["experiment=A-to-B", "also_uncalibrated=x", "track=false"]), tmp_path)
     with pytest.raises(ValueError, match="calibrates nothing"):
-        run(compose_train(["experiment=A-to-B", "seeds=[0]", "also_uncalibrated=x", "tracking=false"]), tmp_path)
+        run(compose_train(["experiment=A-to-B", "seeds=[0]", "also_uncalibrated=x", "track=false"]), tmp_path)
     with pytest.raises(ValueError, match="needs the run dir <root>/A-to-B/L5"):
-        run(compose_train(["experiment=A-to-B", "seeds=[0]", "also_test=[A-to-C:meat]", "tracking=false"]), tmp_path)
+        run(compose_train(["experiment=A-to-B", "seeds=[0]", "also_test=[A-to-C:meat]", "track=false"]), tmp_path)
 
 
 def test_cross_real_calibration_is_fitted_on_the_other_real_sets_scores(train_sets, tmp_path):
@@ -247,7 +247,7 @@ def test_cross_real_calibration_is_fitted_on_the_other_real_sets_scores(train_se
     from palpation.metrics.calibration import fit_calibrator
 
     paths = [f"data.{k}={v}" for k, v in train_sets.items()]
-    tiny = ["model=compact", "clip_len=2", *TINY, "recipe.calibration=cross_real", "tracking=false", *paths]
+    tiny = ["model=compact", "clip_len=2", *TINY, "recipe.calibration=cross_real", "track=false", *paths]
     root, raw_root = tmp_path / "x" / "A-to-B" / "L2", tmp_path / "raw"
     runs = run(compose_train(["experiment=A-to-B", "seeds=[0,1]", "also_test=[A-to-C:meat]",
                               f"also_uncalibrated={raw_root}", *tiny]), root)

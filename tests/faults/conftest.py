@@ -16,6 +16,8 @@ from pathlib import Path
 
 import pytest
 
+from palpation.paths import REPO_ROOT
+
 DOC = Path(__file__).resolve().parents[2] / "docs" / "DEVELOPING.md"
 START, END = "<!-- fault-cases:start -->", "<!-- fault-cases:end -->"
 MESSAGES: dict[str, tuple[str, str]] = {}  # test name -> (what it injects, message)
@@ -59,6 +61,31 @@ def table() -> str:
 def documented() -> str:
     text = DOC.read_text()
     return text[text.index(START) + len(START):text.index(END)].strip() if START in text else ""
+
+
+@pytest.fixture
+def hydra_job():
+    """compose(app, overrides) as a Hydra job sees it (HydraConfig set, overrides recorded)."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.hydra_config import HydraConfig
+    from omegaconf import open_dict
+
+    import palpation.calibration.config  # noqa: F401  (registers the structured configs)
+    import palpation.loop.config  # noqa: F401
+    import palpation.mapping.config  # noqa: F401  (base_vessel_maps)
+    import palpation.model.config  # noqa: F401  (base_train; the folder alone failed without it)
+    import palpation.twin.config  # noqa: F401
+
+    def make(app: str, overrides=()):
+        cfg = compose(app, overrides=list(overrides), return_hydra_config=True)
+        HydraConfig.instance().set_config(cfg)
+        with open_dict(cfg):
+            del cfg["hydra"]
+        return cfg
+
+    with initialize_config_dir(str(REPO_ROOT / "conf"), version_base="1.3"):
+        yield make
+    HydraConfig.instance().cfg = None
 
 
 DESELECTED: list = []

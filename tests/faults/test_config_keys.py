@@ -3,35 +3,12 @@
 import dataclasses
 
 import pytest
-from hydra import compose, initialize_config_dir
-from hydra.core.hydra_config import HydraConfig
-from omegaconf import OmegaConf, open_dict
+from omegaconf import OmegaConf
 
 from palpation.config_check import ConfigKeyError, app_main, check_config
 from palpation.paths import REPO_ROOT
 
 APPS = tuple(sorted(p.stem for p in (REPO_ROOT / "conf").glob("*.yaml")))  # every app has conf/<app>.yaml
-
-
-@pytest.fixture
-def hydra_job():
-    """compose(app, overrides) as a Hydra job sees it (HydraConfig set, overrides recorded)."""
-    import palpation.calibration.config  # noqa: F401  (registers the structured configs)
-    import palpation.loop.config  # noqa: F401
-    import palpation.mapping.config  # noqa: F401  (base_vessel_maps)
-    import palpation.model.config  # noqa: F401  (base_train; the folder alone failed without it)
-    import palpation.twin.config  # noqa: F401
-
-    def make(app: str, overrides=()):
-        cfg = compose(app, overrides=list(overrides), return_hydra_config=True)
-        HydraConfig.instance().set_config(cfg)
-        with open_dict(cfg):
-            del cfg["hydra"]
-        return cfg
-
-    with initialize_config_dir(str(REPO_ROOT / "conf"), version_base="1.3"):
-        yield make
-    HydraConfig.instance().cfg = None
 
 
 @pytest.mark.parametrize("app", APPS)

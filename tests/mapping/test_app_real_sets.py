@@ -35,7 +35,7 @@ def test_silicone_and_meat_maps(tmp_path, real_sets):
         cfg = compose(config_name="vessel_maps", overrides=[
             "configs=[A-to-B,A-to-C]", f"scores.A-to-B={tmp_path / 'sil.npz'}",
             f"scores.A-to-C={tmp_path / 'meat.npz'}", f"data.silicone={SILICONE}", f"data.meat={MEAT}",
-            f"out_dir={tmp_path / 'maps'}", "tracking=false"])
+            f"out_dir={tmp_path / 'maps'}", "track=false"])
     result = run(cfg)
     sil, meat = result["configs"]["A-to-B"], result["configs"]["A-to-C"]
     assert sil["grid"]["rows"]["size_px"] == 100 and sil["dropped_samples"] == 0 and sil["n_samples"] == 120

@@ -23,6 +23,6 @@ def test_schema_refuses_typos_and_wrong_types():
 
 
 def test_scores_of_an_unknown_configuration(tmp_path):
-    cfg = compose_maps(["+scores.B-to-A=run/scores.npz", f"out_dir={tmp_path}", "tracking=false"])
+    cfg = compose_maps(["+scores.B-to-A=run/scores.npz", f"out_dir={tmp_path}", "track=false"])
     with pytest.raises(ValueError, match=r"unknown config key\(s\) \['scores.B-to-A'\]"):
         run(cfg)

@@ -25,7 +25,7 @@ def test_app_maps_a_synthetic_sim_run(sim_set, make_scores, tmp_path):
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="vessel_maps", overrides=[
             "configs=[A-to-A]", f"runs.root={root}", "runs.seeds=[0,1]", f"data.sim={sim_set}",
-            f"out_dir={out}", "tracking=false", "profile=test"])
+            f"out_dir={out}", "track=false", "profile=test"])
     result = run(cfg)
     entry = result["configs"]["A-to-A"]
     assert entry["run"]["seed"] == 1

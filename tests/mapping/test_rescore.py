@@ -41,6 +41,6 @@ def test_dense_slide_scores_every_start_and_maps(tmp_path, make_sim_set):
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="vessel_maps", overrides=[
             "configs=[A-to-A]", f"scores.A-to-A={ckpt.parent / 'scores.npz'}", "sim.source=slide",
-            f"sim.slide_manifest={slide}", "sim.batch_size=32", f"out_dir={tmp_path / 'maps'}", "tracking=false"])
+            f"sim.slide_manifest={slide}", "sim.batch_size=32", f"out_dir={tmp_path / 'maps'}", "track=false"])
     out = run(cfg)
     assert out["configs"]["A-to-A"]["n_samples"] == len(dense["sequence"])

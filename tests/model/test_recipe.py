@@ -129,7 +129,7 @@ def test_calibration_rescales_the_written_scores_only(train_sets, tmp_path):
     from palpation.metrics.calibration import Calibrator
 
     base = ["experiment=C-to-B", "seed=0", "clip_len=3", "graph.rest=ideal", "train.batch_size=4", "train.epochs=1",
-            "train.train_batches=2", "train.val_batches=2", "tracking=false", "progress=false",
+            "train.train_batches=2", "train.val_batches=2", "track=false", "progress=false",
             *[f"data.{k}={v}" for k, v in train_sets.items()]]
     out = {}
     for cal in ("none", "platt"):

@@ -44,7 +44,7 @@ EOF2
   { tail -20 results/recipe_merge_data.log; echo "recipe_merge: the real test sets failed" >&2; exit 1; }
 [ -n "${PARTIAL:-}" ] && args+=(partial=true "partial_reason='${PARTIAL}'")
 "$py" -m palpation.apps.recipe_report "profile=$profile" runs_root=results/recipe out_dir=results/recipe/report \
-  tracking=false "${args[@]}" > results/recipe_merge_report.log 2>&1 || { tail -5 results/recipe_merge_report.log; exit 1; }
+  track=false "${args[@]}" > results/recipe_merge_report.log 2>&1 || { tail -5 results/recipe_merge_report.log; exit 1; }
 rep=results/recipe/report
 cat "$rep/recipe_ablation.csv"
 "$py" -c "import json; r = json.load(open('$rep/recipe_report.json')); print('rows', len(r['rows']), 'partial', r['partial'],

@@ -11,10 +11,13 @@ import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from palpation.config_check import app_main
+from palpation.config_ranges import DictOf, Int, Num
 from palpation.io import save_text
 from palpation.realdata.summary import specs_from_mapping, summary_table, to_markdown
 
 log = logging.getLogger(__name__)
+RANGES = {"datasets": DictOf(min_len=1), "datasets.*.central_trim": Int(ge=0),  # checked before any work
+          "datasets.*.reference_positive_rate": Num(ge=0, le=1, null=True)}
 
 
 def run(cfg: DictConfig) -> dict:
@@ -26,7 +29,7 @@ def run(cfg: DictConfig) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="data_summary")
-@app_main("data_summary")
+@app_main("data_summary", RANGES)
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

@@ -24,6 +24,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from palpation.calibration.objective import marker_mae_px
 from palpation.config_check import app_main
+from palpation.config_ranges import Choice
 from palpation.io import save_json, save_text
 from palpation.figures import loop as figures
 from palpation.loop import report
@@ -42,6 +43,7 @@ from palpation.twin.mesh import SensorMesh
 
 log = logging.getLogger(__name__)
 MODES = ("real", "selftest")
+RANGES = {"mode": Choice(*MODES)}  # the loop's and twin's settings: on LoopConfig, TwinConfig
 
 
 def _tracked(cfg: DictConfig, run_name: str):
@@ -186,7 +188,7 @@ def _plain(r: dict) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="loop")
-@app_main("loop")
+@app_main("loop", RANGES)
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

@@ -16,12 +16,15 @@ from omegaconf import DictConfig, OmegaConf
 
 from palpation.figures.realdata import meat_overview
 from palpation.config_check import app_main
+from palpation.config_ranges import Choice, Int, ListOf
 from palpation.io import save_figure, save_json, save_npz
 from palpation.markers.template import rest_template
-from palpation.realdata.meat import build_meat, metadata
+from palpation.realdata.meat import N_STATES, SCOPES, build_meat, metadata
 from palpation.realdata.panels import read_states
 
 log = logging.getLogger(__name__)
+RANGES = {"similarity_scope": Choice(*SCOPES),  # checked before any work (config_ranges)
+          "overview_states": ListOf(Int(ge=0, le=N_STATES - 1), unique=True)}
 
 
 def run(cfg: DictConfig) -> dict:
@@ -72,7 +75,7 @@ def _track(cfg: DictConfig, meta: dict) -> None:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="meat")
-@app_main("meat")
+@app_main("meat", RANGES)
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

@@ -15,14 +15,23 @@ import pandas as pd
 from omegaconf import DictConfig, OmegaConf
 
 from palpation.config_check import app_main
+from palpation.config_ranges import Int, Num
 from palpation.io import save_json, save_text
 from palpation.markers.detect import RatioDetector
+from palpation.markers.lattice import N_MARKERS
 from palpation.markers.manifest import read_manifest
 from palpation.markers.photoset import list_photos, measure_photos, reference_pipeline_baselines
 from palpation.markers.template import template_from_photo
 from palpation.measured import save_measured_set
 
 log = logging.getLogger(__name__)
+# checked before any work (config_ranges); detector sizes in pixels of the 1920x1080 photo
+RANGES = {"max_missing": Int(ge=0, le=N_MARKERS), "detector.background_px": Int(ge=3, odd=True),
+          "detector.ratio_max": Num(gt=0, le=1), "detector.background_min": Num(ge=0, le=255),
+          "detector.opening_px": Int(ge=1), "detector.area_min_px2": Num(ge=0), "detector.area_max_px2": Num(gt=0),
+          "detector.aspect_max": Num(ge=1), "detector.fill_min": Num(ge=0, le=1), "detector.dummy_factor": Num(gt=0),
+          "detector.rescue_aspect_max": Num(ge=1), "detector.rescue_fill_min": Num(ge=0, le=1),
+          "detector.glint_min": Num(ge=0, le=255), "detector.glint_close_px": Int(ge=1)}
 
 # SPEC §13.2 (median / max displacement vs press d=0, px) and §15.8 (undeformed baselines, px)
 SPEC_VALUES = {
@@ -107,7 +116,7 @@ def _track(cfg: DictConfig, rows: list[dict], summary: dict) -> None:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="photos")
-@app_main("photos")
+@app_main("photos", RANGES)
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

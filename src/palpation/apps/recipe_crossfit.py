@@ -19,9 +19,10 @@ from omegaconf import DictConfig, OmegaConf
 from scipy.special import expit
 from sklearn.metrics import average_precision_score
 
-from palpation.apps.recipe_report import FULL, load_group, maps_config, row_groups
+from palpation.apps.recipe_report import FULL, ROW_RANGES, load_group, maps_config, row_groups
 from palpation.apps.vessel_maps import silicone_layout, source_for
 from palpation.config_check import app_main
+from palpation.config_ranges import Choice, DictOf, ListOf
 from palpation.figures.recipe import reliability_figure
 from palpation.io import atomic_path, save_figure, save_json
 from palpation.mapping.pipeline import TEST_DATASET, MapSettings, config_maps
@@ -32,6 +33,8 @@ from palpation.report.tables import crossfit_table
 
 log = logging.getLogger(__name__)
 CALIBRATIONS = ("stored", "cross_real", "cross_real_shift", "in_sample")
+RANGES = {**ROW_RANGES, "calibrations": ListOf(Choice(*CALIBRATIONS), unique=True),  # before any work
+          "partners": DictOf(Choice(*TEST_DATASET, null=True))}
 
 
 def stored_calibrator(metrics: dict) -> Calibrator:
@@ -201,7 +204,7 @@ def run(cfg: DictConfig) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="recipe_crossfit")
-@app_main("recipe_crossfit")
+@app_main("recipe_crossfit", RANGES)
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

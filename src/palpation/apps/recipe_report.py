@@ -21,13 +21,14 @@ from omegaconf import DictConfig, OmegaConf
 from palpation import tracking
 from palpation.apps.vessel_maps import silicone_layout, source_for
 from palpation.config_check import app_main
+from palpation.config_ranges import SEEDS, Choice, Int, ListOf, Num, Text
 from palpation.figures.recipe import reliability_figure, uncertainty_figure
 from palpation.io import atomic_path, read_json, save_figure, save_json, save_npz, save_text
 from palpation.mapping.pipeline import TEST_DATASET, MapSettings, config_maps
 from palpation.mapping.uncertainty import ensemble_map
 from palpation.metrics.calibration import ece, positive_share
 from palpation.metrics.ensemble import coverage_curve, ensemble
-from palpation.model.recipe import SAME_TRAJECTORY
+from palpation.model.recipe import SAME_TRAJECTORY, SWITCHES
 from palpation.paths import REPO_ROOT
 from palpation.report.paper import CONFIG_TITLES
 from palpation.report.runs import recipe_root, run_dir
@@ -35,6 +36,13 @@ from palpation.report.tables import recipe_ablation, recipe_ablation_markdown, u
 
 log = logging.getLogger(__name__)
 FULL = "none"  # switch_off of a full recipe
+CONFIGS = ListOf(Choice(*TEST_DATASET), unique=True)
+# the rows' settings, read alike by recipe_crossfit; checked before any work (config_ranges)
+ROW_RANGES = {"experiments": CONFIGS, "recipes": ListOf(Text(), unique=True),
+              "switches": ListOf(Choice(*SWITCHES), 0, unique=True),
+              "switch_experiments": ListOf(Choice(*TEST_DATASET), 0, unique=True, null=True), "seeds": SEEDS,
+              "clip_len": Int(ge=1)}
+RANGES = {**ROW_RANGES, "threshold": Num(gt=0, lt=1)}
 
 
 def maps_config(c: dict) -> dict:
@@ -209,7 +217,7 @@ def run(cfg: DictConfig) -> dict:
                                            "partial": bool(c.get("partial")), "left_out": left_out,
                                            "trajectory_checks": checks,
                                            "partial_reason": c.get("partial_reason")})
-    if c.get("tracking"):
+    if c.get("track"):
         _track(c, rows, out)
     return {"table": rows, "uncertainty": unc_rows, "ensembles": summary, "left_out": left_out}
 
@@ -238,7 +246,7 @@ def _track(c: dict, rows: list[dict], out: Path) -> None:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="recipe_report")
-@app_main("recipe_report")
+@app_main("recipe_report", RANGES)
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

@@ -12,9 +12,11 @@ import hydra
 from omegaconf import DictConfig
 
 from palpation.config_check import app_main
+from palpation.config_ranges import ListOf, Text
 from palpation.twin.render import render
 
 log = logging.getLogger(__name__)
+RANGES = {"manifests": ListOf(Text())}  # checked before any work (config_ranges)
 
 
 def run(cfg: DictConfig) -> list[Path]:
@@ -27,7 +29,7 @@ def run(cfg: DictConfig) -> list[Path]:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="render_twin")
-@app_main("render_twin")
+@app_main("render_twin", RANGES)
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

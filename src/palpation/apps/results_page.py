@@ -15,11 +15,13 @@ import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from palpation.config_check import app_main
+from palpation.config_ranges import Num
 from palpation.paths import REPO_ROOT
 from palpation.report.results_page import build_page, write_page
 from palpation.tracking import git_commit
 
 log = logging.getLogger(__name__)
+RANGES = {"noise_k": Num(gt=0)}  # checked before any work (config_ranges)
 
 
 def conf_file(path: str) -> Path:
@@ -51,7 +53,7 @@ def run(cfg: DictConfig) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="results_page")
-@app_main("results_page")
+@app_main("results_page", RANGES)
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

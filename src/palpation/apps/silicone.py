@@ -21,12 +21,17 @@ from omegaconf import DictConfig, OmegaConf
 from palpation.figures.realdata import silicone_overview
 from palpation.camera import video_to_sensor_px
 from palpation.config_check import app_main
+from palpation.config_ranges import Choice, Int, ListOf, Num
 from palpation.io import save_figure, save_json, save_npz
 from palpation.markers.template import rest_template
 from palpation.realdata import silicone as sil
 from palpation.realdata.silicone_check import check_labels
 
 log = logging.getLogger(__name__)
+RANGES = {"task": Choice("set", "check"),  # checked before any work (config_ranges); 1-based videos and frames
+          "videos": ListOf(Int(ge=1, le=sil.N_VIDEOS), unique=True), "n_frames": Int(ge=1, le=sil.N_FRAMES),
+          "min_agreement": Num(ge=0, le=1), "overview": ListOf(ListOf(Int(ge=1, le=sil.N_FRAMES), 2, 2), 0),
+          "workers": Int(ge=1)}
 
 
 def run(cfg: DictConfig) -> dict:
@@ -118,7 +123,7 @@ def _track(cfg: DictConfig, stage: str, metrics: dict) -> None:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="silicone")
-@app_main("silicone")
+@app_main("silicone", RANGES)
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

@@ -15,6 +15,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from palpation.config_check import app_main
+from palpation.config_ranges import DictOf, Num
 from palpation.io import read_npz
 from palpation.mapping import silicone_sequences as seq
 from palpation.mapping.silicone_poses import SweepLayout
@@ -22,6 +23,7 @@ from palpation.markers.template import rest_template
 from palpation.measured_sequences import save_sequence_set
 
 log = logging.getLogger(__name__)
+RANGES = {"depth_mm": Num(gt=0), "bin_mm": Num(gt=0), "layout": DictOf(Num())}  # before any work (config_ranges)
 SILICONE_KEYS = ("markers", "found", "labels", "videos")
 
 
@@ -47,7 +49,7 @@ def run(cfg: DictConfig) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="silicone_sequences")
-@app_main("silicone_sequences")
+@app_main("silicone_sequences", RANGES)
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

@@ -18,12 +18,18 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from palpation.config_check import app_main
+from palpation.config_ranges import SEED, Choice, Int, ListOf, Num, Text
 from palpation.twin.config import REF_LENGTH_SCALE, TwinConfig, from_reference_units
 from palpation.twin.mesh import SensorMesh
 from palpation.twin.output import copy_outputs, write_outputs
 from palpation.twin.runner import EnvRequest, run_batches
 
 log = logging.getLogger(__name__)
+SETS = ("canonical", "vessel_slide", "randomised")
+# settings of conf/simulate.yaml, checked before any work (config_ranges); the twin's are on TwinConfig
+RANGES = {"set": Choice(*SETS), "seed": SEED, "heading_offset_deg": Num(ge=-180, le=180), "n_pairs": Int(ge=1),
+          "batch_size": Int(ge=1), "workers": Int(ge=0), "max_frames": Int(ge=1, null=True),
+          "reuse": ListOf(Text(), 0)}
 
 CANONICAL = ("press", "twist_z", "twist_x", "slide")
 HEADING_RANGE_DEG = (-15.0, 15.0)  # SPEC §7 draws, k_n in reference units (x5 length scale)
@@ -66,7 +72,7 @@ def trajectory_set(name: str, seed: int, n_pairs: int = 1,
                 out.append(EnvRequest(kind="slide", heading_offset_deg=heading, k_n=k_n, c_n=c_n,
                                       vessel=j == 0, seed=seed, name=f"trajectory_{2 * i + j:04d}"))
         return out
-    raise ValueError(f"unknown trajectory set '{name}': use canonical, vessel_slide or randomised")
+    raise ValueError(f"unknown trajectory set '{name}': use one of {SETS}")
 
 
 def request_key(cfg: DictConfig, k_n_range: tuple[float, float]) -> str:
@@ -141,7 +147,7 @@ def _tracked(cfg: DictConfig, summary: dict) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="simulate")
-@app_main("simulate")
+@app_main("simulate", RANGES)
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

@@ -18,9 +18,10 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from palpation.config_check import app_main
+from palpation.config_ranges import SEED, Choice, DictOf, Int, ListOf, Num
 from palpation.io import csv_text, save_json, save_text
-from palpation.loop.slide_gate import GateSettings
-from palpation.loop.slide_loop import COLUMNS, SearchSettings, SlideLoopSettings, run_slide_loop
+from palpation.loop.slide_gate import TESTS, GateSettings
+from palpation.loop.slide_loop import COLUMNS, SAMPLERS, SearchSettings, SlideLoopSettings, run_slide_loop
 from palpation.loop.slides import frame_mae, frame_mae_abs, make_scene, replay_many
 from palpation.measured_sequences import SequenceSet, load_sequence_set
 from palpation.twin.config import TwinConfig
@@ -28,6 +29,15 @@ from palpation.twin.markers import bind_markers
 from palpation.twin.mesh import SensorMesh, cached_sensor_mesh
 
 log = logging.getLogger(__name__)
+# checked before any work (config_ranges); the twin's settings are on TwinConfig. Both folds need a trial (loop.folds)
+RANGES = {"trials": ListOf(Int(ge=1), 2, unique=True, null=True),
+          "frames": ListOf(Int(ge=0), 2, 2, increasing=True, null=True),  # [first, end)
+          "lead_in_mm": Num(ge=0), "base": DictOf(Num()), "search.sampler": Choice(*SAMPLERS),
+          "search.batches": Int(ge=1), "search.per_batch": Int(ge=1), "search.seed": SEED,
+          "gate.inner_folds": Int(ge=2, null=True), "gate.test": Choice(*TESTS), "gate.alpha": Num(gt=0, lt=1),
+          "gate.tries": Int(ge=1), "effects": DictOf(min_len=1), "effects.*": DictOf(min_len=1),
+          "effects.*.*": ListOf(Num()), "max_rounds": Int(ge=0), "min_improvement_px": Num(ge=0),
+          "fold_workers": Choice(1, 2)}
 
 
 def select(sset: SequenceSet, trials, frames) -> tuple[SequenceSet, list[int]]:
@@ -118,7 +128,7 @@ def run(cfg: DictConfig) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="slide_loop")
-@app_main("slide_loop")
+@app_main("slide_loop", RANGES)
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

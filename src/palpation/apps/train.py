@@ -100,13 +100,13 @@ def run(cfg: DictConfig, out_dir: str | Path | None = None) -> dict | list[dict]
             dirs += [root / j.config_name / f"L{j.clip_len}" / f"seed{j.seed}" for j in jobs]
             per_job += [{**p, "recipe": {**p["recipe"], "calibration": "none"}} for p in per_job]
             jobs += [replace(j, train=replace(j.train, calibration="none")) for j in jobs]
-        return run_jobs_together(jobs, dirs, params=per_job, track=bool(cfg.tracking), tags=tags,
+        return run_jobs_together(jobs, dirs, params=per_job, track=bool(cfg.track), tags=tags,
                                  progress=bool(cfg.progress))
     if cfg.also_uncalibrated:
         raise ValueError("also_uncalibrated uses the models of `seeds` trained together: pass seeds=[...]")
     also = [(replace(job, config_name=name, test_on=test_on), d, {**params, "config_name": name, "test_on": test_on})
             for name, test_on, d in also_tested(cfg, job, out_dir)]
-    return run_job(job, out_dir, params=params, track=bool(cfg.tracking), tags=tags,
+    return run_job(job, out_dir, params=params, track=bool(cfg.track), tags=tags,
                    progress=bool(cfg.progress), also=also)
 
 

@@ -16,6 +16,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from palpation.figures.pr_curves import pr_figure
 from palpation.config_check import app_main
+from palpation.config_ranges import SEEDS, Int, ListOf, Text
 from palpation.io import atomic_path, save_figure, save_json, save_text
 from palpation.metrics.aggregate import pr_curve
 from palpation.metrics.scores import load_scores
@@ -23,6 +24,9 @@ from palpation.report import tables
 from palpation.report.runs import load_runs
 
 log = logging.getLogger(__name__)
+RANGES = {"experiments": ListOf(Text(), unique=True), "seeds": SEEDS, "clip_len": Int(ge=1),  # before any work
+          "ablation.experiment": Text(), "ablation.clip_lens": ListOf(Int(ge=1), 0, unique=True),  # []: no Table 3
+          "ablation.seeds": SEEDS}
 
 
 def save_csv(df, path: Path) -> None:
@@ -82,7 +86,7 @@ def _track(c: dict, out: Path, sweep) -> None:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="train_tables")
-@app_main("train_tables")
+@app_main("train_tables", RANGES)
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

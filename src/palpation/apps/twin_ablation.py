@@ -14,11 +14,14 @@ import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from palpation.config_check import app_main
+from palpation.config_ranges import SEEDS, DictOf, Int, ListOf, Text
 from palpation.io import atomic_path, save_text
 from palpation.report.runs import load_runs
 from palpation.report.twin_ablation import twin_ablation, twin_ablation_markdown
 
 log = logging.getLogger(__name__)
+RANGES = {"experiments": ListOf(Text(), unique=True), "seeds": SEEDS, "clip_len": Int(ge=1),  # before any work
+          "twins": DictOf(Text(), min_len=1)}
 
 
 def run(cfg: DictConfig) -> dict:
@@ -35,7 +38,7 @@ def run(cfg: DictConfig) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="twin_ablation")
-@app_main("twin_ablation")
+@app_main("twin_ablation", RANGES)
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

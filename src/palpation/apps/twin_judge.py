@@ -24,8 +24,9 @@ from omegaconf import DictConfig, OmegaConf
 
 from palpation.apps.slide_loop import select
 from palpation.config_check import app_main
+from palpation.config_ranges import SEEDS, Choice, DictOf, Int, ListOf
 from palpation.io import csv_text, read_json, read_npz, save_json, save_npz, save_text
-from palpation.loop.folds import trial_folds
+from palpation.loop.folds import FOLDS, trial_folds
 from palpation.loop.slide_diagnosis import BOUNDS_COLUMNS, drift_bounds
 from palpation.loop.slide_twins import (heldout_trials, read_slide_loop, scene_params, schedule_of, score,
                                         write_fold_twin)
@@ -33,7 +34,8 @@ from palpation.measured_sequences import load_sequence_set
 from palpation.metrics.scores import load_scores
 from palpation.report.markdown import markdown
 from palpation.report.runs import run_dir
-from palpation.report.twin_selection import COLUMNS, Candidate, Member, rule_text, selection_table, sim_set_choice
+from palpation.report.twin_selection import (COLUMNS, DATASET_TWINS, Candidate, Member, rule_text, selection_table,
+                                             sim_set_choice)
 
 log = logging.getLogger(__name__)
 
@@ -193,6 +195,9 @@ def _figure(c: dict, sset, chosen: str, reps: list[dict]) -> None:
 
 
 TASKS = {"fold_twin": fold_twin, "slides": slides, "choice": choice, "table": table}
+RANGES = {"task": Choice(*TASKS), "fold": Choice(*FOLDS, null=True), "candidates": DictOf(min_len=1),  # before any work
+          "candidates.*.folds": ListOf(Choice(*FOLDS), unique=True), "dataset_twin": Choice(*DATASET_TWINS),
+          "seeds": SEEDS, "clip_len": Int(ge=1), "figure_trial": Int(ge=1, null=True)}
 
 
 def run(cfg: DictConfig) -> dict:
@@ -202,7 +207,7 @@ def run(cfg: DictConfig) -> dict:
 
 
 @hydra.main(version_base="1.3", config_path="../../../conf", config_name="twin_judge")
-@app_main("twin_judge")
+@app_main("twin_judge", RANGES)
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

@@ -156,7 +156,7 @@ def run(cfg: DictConfig) -> dict:
     figures.threshold_figure(curves, out / "fig7_threshold_selection")
     save_json(out / "vessel_maps.json", {"profile": c["profile"], "configs": summary,
                                          "silicone_layout": dataclasses.asdict(layout) if layout else None})
-    if c.get("tracking"):
+    if c.get("track"):
         _track(c, table, out)
     return {"table": table.to_dict("records"), "photo": photo.to_dict("records"), "configs": summary}
 

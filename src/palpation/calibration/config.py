@@ -16,15 +16,16 @@ from palpation import paper
 from palpation.calibration.objective import ANGLE_SOURCES, GEOMETRIES, INTERACTIONS
 from palpation.calibration.params import REGISTRY
 from palpation.calibration.search import ParamSpec
+from palpation.config_ranges import SEED, Choice, DictOf, Int, ListOf, Num, Text, ranged
 
 
 @dataclass
 class SearchParam:
     """One searched name; low / high / log left out (null) take the registry's (twin.parameters)."""
 
-    name: str = "E"
-    low: Optional[float] = None
-    high: Optional[float] = None
+    name: str = ranged("E", Text())
+    low: Optional[float] = ranged(None, Num(null=True))
+    high: Optional[float] = ranged(None, Num(null=True))
     log: Optional[bool] = None
 
 
@@ -32,34 +33,38 @@ class SearchParam:
 class PaperParams:
     """The paper's adopted twin (SPEC §6.4): E rounded to 881.4 kPa, k_n 94,908 reference units."""
 
-    E: float = paper.E
-    k_n_ref: float = paper.K_N_REF
+    E: float = ranged(paper.E, Num(gt=0))
+    k_n_ref: float = ranged(paper.K_N_REF, Num(gt=0))
 
 
 @dataclass
 class CalibrationConfig:
-    objective: str = "project"  # project (mean photo MAE, minimised) | reference (SPEC §6.2, maximised)
-    params: list[SearchParam] = field(default_factory=lambda: [SearchParam("E", 1e5, 1e6, True)])  # SPEC §6.3
-    fixed: dict[str, float] = field(default_factory=dict)  # registry name -> value held in every trial
-    interactions: list[str] = field(default_factory=lambda: list(INTERACTIONS))
-    holdout: Optional[str] = None  # one interaction left out of the fit (reported, not fitted)
-    geometry: str = "photo"  # photo: depth/angle from the file names; canonical: SPEC §4.1
-    twist_z_angle: str = "reference"  # reference: 30 deg (quirk 5); filename: 90 deg
-    sampler: str = "gp"  # gp | tpe | random (calibration.search.make_sampler)
-    seed: int = 42
-    n_trials: int = 10
-    n_startup: int = 5  # random trials, proposed and simulated as one batch
-    batch_size: int = 1  # proposals per batch after the startup (1 = the reference's sequential GP)
-    worst_px: float = 165.0  # project: the score of a diverged trial (3 marker spacings)
+    # project (mean photo MAE, minimised) | reference (SPEC §6.2, maximised)
+    objective: str = ranged("project", Choice("project", "reference"))
+    params: list[SearchParam] = ranged(rule=ListOf(), factory=lambda: [SearchParam("E", 1e5, 1e6, True)])  # SPEC §6.3
+    fixed: dict[str, float] = ranged(rule=DictOf(Num()), factory=dict)  # registry name -> value held in every trial
+    interactions: list[str] = ranged(rule=ListOf(Choice(*INTERACTIONS), unique=True),
+                                     factory=lambda: list(INTERACTIONS))
+    # one interaction left out of the fit (reported, not fitted)
+    holdout: Optional[str] = ranged(None, Choice(*INTERACTIONS, null=True))
+    # photo: depth/angle from the file names; canonical: SPEC §4.1
+    geometry: str = ranged("photo", Choice(*GEOMETRIES))
+    twist_z_angle: str = ranged("reference", Choice(*ANGLE_SOURCES))  # reference: 30 deg (quirk 5); filename: 90 deg
+    sampler: str = ranged("gp", Choice("gp", "tpe", "random"))  # gp | tpe | random (calibration.search.make_sampler)
+    seed: int = ranged(42, SEED)
+    n_trials: int = ranged(10, Int(ge=1))
+    n_startup: int = ranged(5, Int(ge=0))  # random trials, proposed and simulated as one batch
+    batch_size: int = ranged(1, Int(ge=1))  # proposals per batch after the startup (1 = the reference's sequential GP)
+    worst_px: float = ranged(165.0, Num(gt=0))  # project: the score of a diverged trial (3 marker spacings)
     split_by_kind: str = "auto"  # one twin run per interaction: auto (= on CPU), true, false
     # reference objective (SPEC §6.2)
-    heading_seed: int = 42  # the one heading draw per run: +8.22 deg
-    trigger_px: float = 55.0
-    cap_frames: int = 400
-    norm_px: float = 165.0
-    worst_value: float = -1.0
+    heading_seed: int = ranged(42, SEED)  # the one heading draw per run: +8.22 deg
+    trigger_px: float = ranged(55.0, Num(gt=0))
+    cap_frames: int = ranged(400, Int(ge=1))
+    norm_px: float = ranged(165.0, Num(gt=0))
+    worst_value: float = ranged(-1.0, Num())
     paper: PaperParams = field(default_factory=PaperParams)
-    max_frames: Optional[int] = None  # cut every trajectory (smoke tests only)
+    max_frames: Optional[int] = ranged(None, Int(ge=1, null=True))  # cut every trajectory (smoke tests only)
 
     def space(self) -> list[ParamSpec]:
         """The search space; a bound or log flag left null comes from the registry (calibration.params)."""

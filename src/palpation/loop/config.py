@@ -7,7 +7,9 @@ from typing import Optional
 
 from hydra.core.config_store import ConfigStore
 
+from palpation.config_ranges import SEED, Choice, DictOf, Int, ListOf, Num, Text, ranged
 from palpation.loop.effects import EFFECTS, PARAMS, check_effects
+from palpation.loop.inputs import TWIST_Z_ANGLES
 
 SAMPLERS = ("gp", "tpe", "random")
 
@@ -16,19 +18,20 @@ SAMPLERS = ("gp", "tpe", "random")
 class SearchSettings:
     """One recalibration (an Optuna study per problem and round, persistent in <out>/study.journal)."""
 
-    sampler: str = "gp"
-    seed: int = 42
-    n_trials: int = 10  # completed trials per study, warm starts included
-    n_startup: int = 4  # trials before the GP takes over (the warm starts count)
-    batch_size: int = 1
-    worst_px: float = 165.0  # score of a diverged trial (3 marker spacings)
-    bounds: dict[str, list[float]] = field(default_factory=dict)  # name -> [low, high], over effects.PARAMS
+    sampler: str = ranged("gp", Choice(*SAMPLERS))
+    seed: int = ranged(42, SEED)
+    n_trials: int = ranged(10, Int(ge=1))  # completed trials per study, warm starts included
+    n_startup: int = ranged(4, Int(ge=0))  # trials before the GP takes over (the warm starts count)
+    batch_size: int = ranged(1, Int(ge=1))
+    worst_px: float = ranged(165.0, Num(gt=0))  # score of a diverged trial (3 marker spacings)
+    # name -> [low, high], over effects.PARAMS
+    bounds: dict[str, list[float]] = ranged(rule=DictOf(ListOf(Num(), 2, 2, increasing=True)), factory=dict)
     # rounds >= 1: a log-scaled parameter fitted in an earlier round is searched within this factor of its
     # value (a trust region); 0 = off. Off by default: on the photos E moves x3 once surface contact is in.
-    trust_factor: float = 0.0
+    trust_factor: float = ranged(0.0, Num(ge=0))
     # processes that make the Optuna proposals of all problems' studies in parallel (1 = in this process).
     # A GP proposal costs ~0.5 s of CPU: with 60 self-test problems on a GPU they, not the twin, set the pace
-    ask_workers: int = 1
+    ask_workers: int = ranged(1, Int(ge=1))
 
 
 @dataclass
@@ -38,36 +41,42 @@ class SelftestConfig:
     Size = len(cases) x runs_per_case. A case is '+'-joined effects; `unlisted:<name>` is one outside the
     candidate list (loop.selftest.UNLISTED)."""
 
-    cases: list[str] = field(default_factory=lambda: [
+    cases: list[str] = ranged(rule=ListOf(Text()), factory=lambda: [
         "surface_contact", "camera", "viscous", "layered", "marker_anchor",  # singles
         "surface_contact+friction",  # a dependent pair (friction acts only through contact)
         "surface_contact+mount", "surface_contact+camera", "camera+layered", "viscous+marker_anchor",  # pairs
         "unlisted:image_distortion", "unlisted:marker_defect"])  # outside the list
-    runs_per_case: int = 1
-    strength_low: float = 1.0  # injected strength in nominal steps, drawn uniformly in [low, high]
-    strength_high: float = 2.5
-    noise_px: float = 0.2  # std per coordinate (SPEC §13.2: photo noise < 0.2 px)
-    base_effects: list[str] = field(default_factory=list)  # on in the starting twin (none: as the real mode)
-    base_params: dict[str, float] = field(default_factory=lambda: {"E": 1.2225e6})
-    states: list[str] = field(default_factory=lambda: ["press", "twist_z", "twist_x"])
-    holdout: list[str] = field(default_factory=lambda: ["twist_z"])
-    max_rounds: int = 1
-    seed: int = 0
+    runs_per_case: int = ranged(1, Int(ge=1))
+    strength_low: float = ranged(1.0, Num(gt=0))  # injected strength in nominal steps, drawn uniformly in [low, high]
+    strength_high: float = ranged(2.5, Num(gt=0))
+    noise_px: float = ranged(0.2, Num(ge=0))  # std per coordinate (SPEC §13.2: photo noise < 0.2 px)
+    # on in the starting twin (none: as the real mode)
+    base_effects: list[str] = ranged(rule=ListOf(Choice(*EFFECTS), 0, unique=True), factory=list)
+    base_params: dict[str, float] = ranged(rule=DictOf(Num()), factory=lambda: {"E": 1.2225e6})
+    states: list[str] = ranged(rule=ListOf(Text(), unique=True), factory=lambda: ["press", "twist_z", "twist_x"])
+    holdout: list[str] = ranged(rule=ListOf(Text(), 0, unique=True), factory=lambda: ["twist_z"])
+    max_rounds: int = ranged(1, Int(ge=1))
+    seed: int = ranged(0, SEED)
 
 
 @dataclass
 class LoopConfig:
-    effects: list[str] = field(default_factory=lambda: list(EFFECTS))  # the candidates
-    states: Optional[list[str]] = None  # state names or kinds to use; None = every interaction state
-    holdout: list[str] = field(default_factory=lambda: ["slide"])  # scored each round, never fitted
-    twist_z_angle: str = "reference"  # quirk 5: 30 deg as the reference, or the file name's angle
-    max_rounds: int = 4
+    # the candidates
+    effects: list[str] = ranged(rule=ListOf(Choice(*EFFECTS), unique=True), factory=lambda: list(EFFECTS))
+    # state names or kinds to use; None = every interaction state
+    states: Optional[list[str]] = ranged(None, ListOf(Text(), unique=True, null=True))
+    # scored each round, never fitted
+    holdout: list[str] = ranged(rule=ListOf(Text(), 0, unique=True), factory=lambda: ["slide"])
+    # quirk 5: 30 deg as the reference, or the file name's angle
+    twist_z_angle: str = ranged("reference", Choice(*TWIST_Z_ANGLES))
+    max_rounds: int = ranged(4, Int(ge=0))
     # an effect is kept if the held-out MAE falls by min(min_improvement_px, min_improvement_rel x its value):
     # 0.05 px on the photos, less near a noise floor (self-test sets sit at ~0.25 px)
-    min_improvement_px: float = 0.05
-    min_improvement_rel: float = 0.05
-    tries_per_round: int = 2  # effects tried per round, best-ranked first, until one is kept
-    pair_tries: int = 2  # then effect pairs tried jointly (dependent pairs, pairs of the BIC-best subset)
+    min_improvement_px: float = ranged(0.05, Num(ge=0))
+    min_improvement_rel: float = ranged(0.05, Num(ge=0))
+    tries_per_round: int = ranged(2, Int(ge=1))  # effects tried per round, best-ranked first, until one is kept
+    # then effect pairs tried jointly (dependent pairs, pairs of the BIC-best subset)
+    pair_tries: int = ranged(2, Int(ge=0))
     # compensation guard (loop.refit): every round also re-fits the current parameters with no new effect (the
     # null try, same budget, same twin batches); an effect must pass the gate against it too. Before the final
     # check, up to final_refit_iters Levenberg-Marquardt steps bring the final twin to its optimum (0 = off)
@@ -88,7 +97,7 @@ class LoopConfig:
     # it: on the reduced dev-seed loop it fixed one strong contact + camera run and lost the other to a wrong set
     # (the grid runs at the search's physics, where k_s / E trade against f; docs/loop.md). The GPU script turns it on
     camera_grid_rotation: bool = False
-    camera_grid_refine: int = 0
+    camera_grid_refine: int = ranged(0, Int(ge=0))
     # the rotation grid (3 halvings) where the physics is near its optimum instead: a start of the round's null try and
     # of the final refit of a set that has the camera (both converge; the final refit keeps a start only if the
     # held-out is not significantly worse). At the search's physics of the try that adds the camera the grid's f
@@ -113,7 +122,7 @@ class LoopConfig:
     projected_null: bool = True
     # up to final_refit_iters LM steps; a chain stops earlier once a step gains < 0.1 % (loop.polish.MIN_GAIN).
     # 3 left the 60-run H200 self-test's contact + camera finals still descending (1.63 -> 1.08 px in 3 steps)
-    final_refit_iters: int = 10
+    final_refit_iters: int = ranged(10, Int(ge=0))
     # after the final refit, up to this many more passes of the camera's rotation grid (3 halvings) at the refit's own
     # end point, each followed by LM and kept as the refit (fit falls, held-out not significantly worse), while the
     # fitted residual stays above unexplained_ratio x the noise (loop.refit.after_passes). The first pass's grid runs
@@ -122,7 +131,7 @@ class LoopConfig:
     # Adopted with final_refit_off_starts by the rule written before the 60-run GPU self-tests (H100, 2026-11-26):
     # in-list `unexplained` 0 + 2 -> 0 + 0 on seeds 0 and 2, no run lost, out-of-list 100 %; seed 7 (held out):
     # every aim met. Base and the GPU self-test; quick and paper keep it off (0)
-    final_refit_regrid: int = 2
+    final_refit_regrid: int = ranged(2, Int(ge=0))
     # after the final refit, one LM pass from its end point with each added effect switched off (where that point lies in
     # the search box; not contact), above unexplained_ratio x the noise (loop.refit.after_passes): an effect kept in
     # an early round can hold a compensating basin once a later one arrived (held-out seed 2, run 31: contact + camera
@@ -133,29 +142,32 @@ class LoopConfig:
     # (loop.polish): polish_iters iterations from its polish_starts best distinct trials (0 = off), so tries
     # are compared at convergence; the final refit starts from the final twin and final_refit_starts - 1
     # more distinct trials of the last kept try (a camera found in the wrong basin)
-    polish_iters: int = 2
-    polish_starts: int = 1
-    final_refit_starts: int = 3
-    gate_fit_rel: float = 0.3  # gate (loop.gate): a fit that falls this much is kept if the held-out does
-    gate_z: float = 2.0  # not move beyond gate_z cluster standard errors either way
+    polish_iters: int = ranged(2, Int(ge=0))
+    polish_starts: int = ranged(1, Int(ge=1))
+    final_refit_starts: int = ranged(3, Int(ge=1))
+    # gate (loop.gate): a fit that falls this much is kept if the held-out does
+    gate_fit_rel: float = ranged(0.3, Num(gt=0, le=1))
+    gate_z: float = ranged(2.0, Num(gt=0))  # not move beyond gate_z cluster standard errors either way
     # final check (loop.unexplained): detector noise assumed when the set gives none, the test's level and
     # the RMS ratio over the noise from which an unexplained residual is reported
-    noise_px: float = 0.2
-    unexplained_alpha: float = 1.0e-3
-    unexplained_ratio: float = 2.0
+    noise_px: float = ranged(0.2, Num(gt=0))
+    unexplained_alpha: float = ranged(1.0e-3, Num(gt=0, lt=1))
+    unexplained_ratio: float = ranged(2.0, Num(gt=0))
     # the mean-MAE target (issue 5: 0.25 mm) was set for the flat-tip photo set only: it is judged on the set
     # whose file stem is target_set, never on another (issue 13.6)
     target_set: str = "measured_photos"
-    target_mm: float = 0.25
-    shell_thickness_mm: float = 1.5  # layered skin (SPEC gives no two-material values; a choice)
+    target_mm: float = ranged(0.25, Num(gt=0))
+    shell_thickness_mm: float = ranged(1.5, Num(gt=0))  # layered skin (SPEC gives no two-material values; a choice)
     calibrate_round0: bool = True  # fit `round0_params` before any effect (round 0 = the calibrated twin)
-    round0_params: list[str] = field(default_factory=lambda: ["E"])
-    recalibrate: list[str] = field(default_factory=lambda: ["E"])  # searched every round, with the effects'
-    steps: dict[str, float] = field(default_factory=dict)  # nominal step per parameter, over effects.py
+    round0_params: list[str] = ranged(rule=ListOf(Choice(*PARAMS), 0, unique=True), factory=lambda: ["E"])
+    # searched every round, with the effects'
+    recalibrate: list[str] = ranged(rule=ListOf(Choice(*PARAMS), 0, unique=True), factory=lambda: ["E"])
+    # nominal step per parameter, over effects.py
+    steps: dict[str, float] = ranged(rule=DictOf(Num(gt=0)), factory=dict)
     search: SearchSettings = field(default_factory=SearchSettings)
     selftest: SelftestConfig = field(default_factory=SelftestConfig)
     split_by_kind: str = "auto"  # one twin batch per kind: auto (= on the CPU), true, false
-    max_frames: Optional[int] = None  # cut every trajectory (smoke tests only)
+    max_frames: Optional[int] = ranged(None, Int(ge=1, null=True))  # cut every trajectory (smoke tests only)
 
     def validate(self) -> "LoopConfig":
         check_effects(self.effects, "loop.effects")

@@ -51,7 +51,7 @@ def compose_job(experiment: str, device: str, sim: str, overrides: list[str]) ->
 
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="train", overrides=[f"experiment={experiment}", f"device={device}",
-                                                      f"data.sim={sim}", "tracking=false", *overrides])
+                                                      f"data.sim={sim}", "track=false", *overrides])
     return job_from_config(cfg)
 
 

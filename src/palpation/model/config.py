@@ -17,6 +17,7 @@ from typing import Dict, List, Optional
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
+from palpation.config_ranges import SEED, Choice, DictOf, Int, ListOf, Num, Text, ranged
 from palpation.graph.augment import ROTATION_MODES
 
 
@@ -24,13 +25,13 @@ from palpation.graph.augment import ROTATION_MODES
 class ModelConfig:
     """Widths of SPEC §9: large s=248 / L_d=256 / k=128, compact 56 / 64 / 32."""
 
-    name: str = "large"
-    encoder_width: int = 248  # s
-    latent_width: int = 256  # L_d = s + type_dim
-    skip_width: int = 128  # k
-    type_dim: int = 8
-    input_dropout: float = 0.1
-    dropout: float = 0.3
+    name: str = ranged("large", Text())
+    encoder_width: int = ranged(248, Int(ge=1))  # s
+    latent_width: int = ranged(256, Int(ge=1))  # L_d = s + type_dim
+    skip_width: int = ranged(128, Int(ge=1))  # k
+    type_dim: int = ranged(8, Int(ge=1))
+    input_dropout: float = ranged(0.1, Num(ge=0, lt=1))
+    dropout: float = ranged(0.3, Num(ge=0, lt=1))
 
     def __post_init__(self):
         if self.latent_width != self.encoder_width + self.type_dim:
@@ -45,6 +46,7 @@ Rotation = StrEnum("Rotation", {m: m for m in ROTATION_MODES})
 Schedule = StrEnum("Schedule", {m: m for m in ("none", "step")})
 SelectMetric = StrEnum("SelectMetric", {m: m for m in ("fg_iou", "ap")})
 Calibration = StrEnum("Calibration", {m: m for m in ("none", "temperature", "platt", "cross_real")})
+DATASETS = ("sim", "silicone", "meat")  # train_on / test_on: the sets graph.sources.load_dataset reads
 CHOICES = {"norm_stats": NormStats, "rotation": Rotation, "schedule": Schedule, "select_metric": SelectMetric,
            "calibration": Calibration}
 
@@ -104,16 +106,16 @@ class TrainConfig:
 class SizesSchema:
     """One model's sizes: recipe.sizes.<model> and the chosen `train` block."""
 
-    batch_size: int = MISSING
-    epochs: int = MISSING
-    train_batches: Optional[int] = MISSING  # null = the whole training split
-    val_batches: Optional[int] = MISSING
+    batch_size: int = ranged(MISSING, Int(ge=1))
+    epochs: int = ranged(MISSING, Int(ge=1))
+    train_batches: Optional[int] = ranged(MISSING, Int(ge=1, null=True))  # null = the whole training split
+    val_batches: Optional[int] = ranged(MISSING, Int(ge=1, null=True))
 
 
 @dataclass
 class RunSizesSchema(SizesSchema):
-    restarts: int = MISSING
-    threshold: float = MISSING
+    restarts: int = ranged(MISSING, Int(ge=1))
+    threshold: float = ranged(MISSING, Num(gt=0, lt=1))
 
 
 @dataclass
@@ -121,23 +123,23 @@ class RecipeSchema:
     """conf/recipe/*.yaml: TrainConfig's recipe fields and the sizes per model."""
 
     name: str = MISSING
-    lr: float = MISSING
-    weight_decay: float = MISSING
-    focal_gamma: float = MISSING
+    lr: float = ranged(MISSING, Num(gt=0))
+    weight_decay: float = ranged(MISSING, Num(ge=0))
+    focal_gamma: float = ranged(MISSING, Num(ge=0))
     norm_stats: NormStats = MISSING
-    norm_clips: Optional[int] = MISSING
+    norm_clips: Optional[int] = ranged(MISSING, Int(ge=1, null=True))
     rotation: Rotation = MISSING
     schedule: Schedule = MISSING
-    step_size: int = MISSING
-    step_gamma: float = MISSING
-    jitter_px: float = MISSING
-    marker_dropout: float = MISSING
-    displacement_scale: float = MISSING
-    patience: Optional[int] = MISSING
+    step_size: int = ranged(MISSING, Int(ge=1))
+    step_gamma: float = ranged(MISSING, Num(gt=0))
+    jitter_px: float = ranged(MISSING, Num(ge=0))
+    marker_dropout: float = ranged(MISSING, Num(ge=0, lt=1))  # as TrainConfig checks a run built in code
+    displacement_scale: float = ranged(MISSING, Num(ge=0, lt=1))
+    patience: Optional[int] = ranged(MISSING, Int(ge=1, null=True))
     select_metric: SelectMetric = MISSING
     calibration: Calibration = MISSING
     remove_common_motion: bool = MISSING
-    sizes: Dict[str, SizesSchema] = MISSING
+    sizes: Dict[str, SizesSchema] = ranged(MISSING, DictOf(min_len=1))
 
 
 @dataclass
@@ -149,26 +151,26 @@ class TrainDataSchema:
 
 @dataclass
 class GraphSchema:
-    rest: str = MISSING
+    rest: str = ranged(MISSING, Choice("template", "ideal"))
 
 
 @dataclass
 class TrainAppConfig:
     config_name: str = MISSING
-    seed: int = MISSING
-    seeds: Optional[List[int]] = MISSING  # null: train `seed` alone
-    also_test: List[str] = MISSING  # with seeds: "<config name>:<test set>" scored by the same models
+    seed: int = ranged(MISSING, SEED)
+    seeds: Optional[List[int]] = ranged(MISSING, ListOf(SEED, unique=True, null=True))  # null: train `seed` alone
+    also_test: List[str] = ranged(MISSING, ListOf(Text(), 0, unique=True))  # with seeds: "<config name>:<test set>"
     also_uncalibrated: Optional[str] = MISSING  # with seeds: where the raw-score twins of the runs go
-    clip_len: int = MISSING
+    clip_len: int = ranged(MISSING, Int(ge=1))
     device: str = MISSING
-    train_on: str = MISSING
-    test_on: str = MISSING
+    train_on: str = ranged(MISSING, Choice(*DATASETS))
+    test_on: str = ranged(MISSING, Choice(*DATASETS))
     data: TrainDataSchema = field(default_factory=TrainDataSchema)
     graph: GraphSchema = field(default_factory=GraphSchema)
     train: RunSizesSchema = field(default_factory=RunSizesSchema)
     model: ModelConfig = field(default_factory=ModelConfig)
     recipe: RecipeSchema = field(default_factory=RecipeSchema)
-    tracking: bool = MISSING
+    track: bool = MISSING
     progress: bool = MISSING
 
 

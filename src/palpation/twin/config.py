@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from hydra.core.config_store import ConfigStore
 
 from palpation import paper
+from palpation.config_ranges import Choice, Int, ListOf, Num, Text, ranged
 
 RESIDENT_VARIANTS = ("tiles", "onesync", "packed", "atomic", "compact", "compact_atomic")  # twin/resident_sync.py
 RESIDENT_COLORINGS = ("mesh_order", "largest_first")  # resident.color_tets
@@ -36,100 +37,104 @@ def from_reference_units(*, k_n: float | None = None, c_n: float | None = None,
 
 @dataclass
 class MeshConfig:
-    resolution: str = "coarse"  # name of the cached mesh: results/twin/mesh_{resolution}.npz
-    length_factor: float = 0.7  # gmsh Mesh.CharacteristicLengthFactor (reference 0.3)
+    resolution: str = ranged("coarse", Text())  # name of the cached mesh: results/twin/mesh_{resolution}.npz
+    length_factor: float = ranged(0.7, Num(gt=0))  # gmsh Mesh.CharacteristicLengthFactor (reference 0.3)
 
 
 @dataclass
 class MaterialConfig:
-    E: float = paper.E  # Pa (SPEC §2.3, calibrated)
-    nu: float = paper.NU
-    rho: float = paper.RHO  # kg/m^3
+    E: float = ranged(paper.E, Num(gt=0))  # Pa (SPEC §2.3, calibrated)
+    nu: float = ranged(paper.NU, Num(gt=0, lt=0.5))
+    rho: float = ranged(paper.RHO, Num(gt=0))  # kg/m^3
     # "standard": mu, lambda from E, nu as the reference does (small-strain modulus then ~0.75 E
     # at nu=0.497, docs/twin.md); "smith": Smith et al. 2018 re-parametrisation, small-strain E exact.
-    lame: str = "standard"
+    lame: str = ranged("standard", Choice("standard", "smith"))
     # layered skin (residual loop): tets within shell_thickness of the outer skin get the modulus
     # E * shell_ratio. 0 m = one homogeneous material (the reference; the paper notes the real sensor
     # has two, SPEC gives no values). Any thickness > 0 selects the layered elastic kernel.
-    shell_thickness: float = 0.0  # m
-    shell_ratio: float = 1.0  # E_shell / E_core; per env as "shell_ratio"
+    shell_thickness: float = ranged(0.0, Num(ge=0))  # m
+    shell_ratio: float = ranged(1.0, Num(gt=0))  # E_shell / E_core; per env as "shell_ratio"
 
 
 @dataclass
 class DampingConfig:
-    alpha: float = paper.ALPHA_REF / REF_LENGTH_SCALE  # N s/m per tet edge pair (reference 0.1 at x5 scale)
-    beta: float = paper.BETA  # fraction removed from the elastic force (SPEC §2.3)
+    # N s/m per tet edge pair (reference 0.1 at x5 scale)
+    alpha: float = ranged(paper.ALPHA_REF / REF_LENGTH_SCALE, Num(ge=0))
+    beta: float = ranged(paper.BETA, Num(ge=0, lt=1))  # fraction removed from the elastic force (SPEC §2.3)
     per_env: bool = False  # alpha per env ("alpha" env parameter; selects the layered elastic kernel)
 
 
 @dataclass
 class IntegratorConfig:
-    dt: float = 1e-5  # s, substep
-    substeps: int = 124  # per frame; frame = dt * substeps = 1.24 ms
-    mass_scale: float = 25.0  # 25 = reference-equivalent; 1 = physical (needs dt <= stable_dt)
+    dt: float = ranged(1e-5, Num(gt=0))  # s, substep
+    substeps: int = ranged(124, Int(ge=1))  # per frame; frame = dt * substeps = 1.24 ms
+    mass_scale: float = ranged(25.0, Num(gt=0))  # 25 = reference-equivalent; 1 = physical (needs dt <= stable_dt)
     zero_velocity_each_frame: bool = True  # reference quirk 10
     # how tets' nodal forces are summed: "scatter" (float atomics), "gather" (each node sums its own
     # slots: no atomics, deterministic on GPUs; SDF contact only), "auto" (gather on CUDA, scatter on
     # the CPU, where both give the same bits). docs/twin.md compares them.
-    force_sum: str = "auto"
+    force_sum: str = ranged("auto", Choice("auto", "scatter", "gather"))
     # "streamed": one launch per pass per substep, state in global memory (the reference path, and
     # the CPU path); "resident": one launch per frame, each env's x, v, f in one block's shared
     # memory (twin/resident.py, issue 17; SDF contact; the layered elastic kernel in LAYERED_VARIANTS);
     # "auto": resident on CUDA where the config and the block's shared memory allow it; on the CPU resident with one
     # lane in mesh order (SDF contact), the same bits as "streamed"; else streamed (resident.runs_resident)
-    kernel: str = "streamed"
+    kernel: str = ranged("streamed", Choice(*KERNELS))
     # "auto" runs the streamed kernels for batches of fewer envs: a resident env is one block on one SM whatever the
     # batch, so few envs leave most SMs idle. The crossover depends on the scene (H100, docs/twin.md): 40 envs for a
     # press off the phantom, above 60 for the slide loop's replays in contact (no gain at 50-60); 100 keeps every
     # measured case on its faster side (a Sim set's 500: resident, 3.3x; the loops' calls of 5-60: streamed)
-    auto_min_envs: int = 100
+    auto_min_envs: int = ranged(100, Int(ge=1))
     # threads per env block of the resident kernel (<= 512: 106 registers a thread; compact <= 384, two blocks an SM).
     # 320 with compact: the fastest point of the H200 variant run, 12.63 s for 500 reference envs (docs/twin.md)
-    block_dim: int = 320
+    block_dim: int = ranged(320, Int(ge=1, le=512))
     # the resident kernel's variant (twin/resident_sync.py): "tiles" (a barrier per tile write, the
     # first version), "onesync" / "packed" (one barrier per colour chunk; packed, prefetched mesh
     # constants: the same bits as "tiles"), "atomic" (shared atomics, full chunks; GPU sums unordered),
     # "compact" ("packed" with a force tile over the force nodes only: 111 KB, two blocks of <= 384 an SM),
     # "compact_atomic" (both)
-    resident_variant: str = "compact"
-    resident_coloring: str = "mesh_order"  # or "largest_first": 41 colour chunks at reference, not 44
+    resident_variant: str = ranged("compact", Choice(*RESIDENT_VARIANTS))
+    # or "largest_first": 41 colour chunks at reference, not 44
+    resident_coloring: str = ranged("mesh_order", Choice(*RESIDENT_COLORINGS))
 
 
 @dataclass
 class ContactConfig:
-    k_n: float = paper.K_N_REF / REF_LENGTH_SCALE  # N/m, sensor-vessel normal stiffness
-    c_n: float = paper.C_N_REF  # N s/m^2, multiplies the closing speed AND the depth (reference form)
-    k_t: float = 0.0  # N s/m, tangential (viscous) stiffness
-    mu: float = 0.0  # Coulomb friction coefficient
+    k_n: float = ranged(paper.K_N_REF / REF_LENGTH_SCALE, Num(ge=0))  # N/m, sensor-vessel normal stiffness
+    # N s/m^2, multiplies the closing speed AND the depth (reference form)
+    c_n: float = ranged(paper.C_N_REF, Num(ge=0))
+    k_t: float = ranged(0.0, Num(ge=0))  # N s/m, tangential (viscous) stiffness
+    mu: float = ranged(0.0, Num(ge=0))  # Coulomb friction coefficient
     vessel: bool = True  # default for the per-env vessel switch
     phantom_contact: bool = False  # sensor-phantom half-space contact (off in the reference)
-    k_s: float = 2.0e4  # N/m per node, phantom surface stiffness (only if phantom_contact)
-    c_s: float = 0.0  # N s/m^2, phantom surface damping (same form as c_n)
-    slip_eps: float = 1e-6  # m/s, no tangential force below this slip speed (reference 5e-6 sim)
-    rule: str = "sdf"  # "sdf": node vs analytic vessel SDF; "centroid": reference triangle rule
+    k_s: float = ranged(2.0e4, Num(ge=0))  # N/m per node, phantom surface stiffness (only if phantom_contact)
+    c_s: float = ranged(0.0, Num(ge=0))  # N s/m^2, phantom surface damping (same form as c_n)
+    slip_eps: float = ranged(1e-6, Num(gt=0))  # m/s, no tangential force below this slip speed (reference 5e-6 sim)
+    # "sdf": node vs analytic vessel SDF; "centroid": reference triangle rule
+    rule: str = ranged("sdf", Choice("sdf", "centroid"))
     # compliant phantom (issue 12; twin.contact): "node" = k_s per surface node (above); "foundation" =
     # a Winkler foundation k_f (pressure per penetration) stiffened over the scene's vessel inclusions.
     # Acts only with phantom_contact; the values are modelling choices bounded in twin.parameters.
-    phantom_model: str = "node"
-    k_f: float = 1.0e7  # N/m^3: E ~ 200 kPa silicone over a ~20 mm column
-    incl_ratio: float = 5.0  # E_vessel / E_phantom
-    incl_depth: float = 0.003  # m, vessel axis below the phantom top (SPEC §3.1's 3 mm)
-    incl_diameter: float = 0.0046  # m, the median of the phantom photo's vessel widths
+    phantom_model: str = ranged("node", Choice("node", "foundation"))
+    k_f: float = ranged(1.0e7, Num(gt=0))  # N/m^3: E ~ 200 kPa silicone over a ~20 mm column
+    incl_ratio: float = ranged(5.0, Num(gt=0))  # E_vessel / E_phantom
+    incl_depth: float = ranged(0.003, Num(ge=0))  # m, vessel axis below the phantom top (SPEC §3.1's 3 mm)
+    incl_diameter: float = ranged(0.0046, Num(gt=0))  # m, the median of the phantom photo's vessel widths
 
 
 @dataclass
 class SceneConfig:
-    phantom_top_z: float = 0.015  # m, world z of the phantom surface (SPEC §3.2: 0.075 sim)
-    vessel_radius: float = 0.002
-    vessel_length: float = 0.040
-    vessel_depth: float = 0.003  # axis below the phantom top
-    vessel_center_x: float = 0.039  # m, centre of the axis (SPEC §3.1: 0.195 sim)
-    vessel_center_y: float = 0.039
+    phantom_top_z: float = ranged(0.015, Num())  # m, world z of the phantom surface (SPEC §3.2: 0.075 sim)
+    vessel_radius: float = ranged(0.002, Num(gt=0))
+    vessel_length: float = ranged(0.040, Num(gt=0))
+    vessel_depth: float = ranged(0.003, Num(ge=0))  # axis below the phantom top
+    vessel_center_x: float = ranged(0.039, Num())  # m, centre of the axis (SPEC §3.1: 0.195 sim)
+    vessel_center_y: float = ranged(0.039, Num())
     # m, effective column height of the Winkler foundation (contact.phantom_model): a half-space loaded over
     # a contact of radius a is stressed to a depth ~a (~10 mm here), not through the whole phantom
-    phantom_thickness: float = 0.008
+    phantom_thickness: float = ranged(0.008, Num(gt=0))
     # vessel centreline segments of the compliant phantom, [x0, y0, x1, y1] world metres each (issue 12)
-    inclusions: list[list[float]] = field(default_factory=list)
+    inclusions: list[list[float]] = ranged(rule=ListOf(ListOf(Num(), 4, 4), 0), factory=list)
 
 
 @dataclass
@@ -143,10 +148,10 @@ class CameraConfig:
     fixes where they are), so the error changes displacements, not the rest image.
     """
 
-    f_scale: float = 1.0
-    rotation_deg: float = 0.0
-    dx_px: float = 0.0
-    dy_px: float = 0.0
+    f_scale: float = ranged(1.0, Num(gt=0))
+    rotation_deg: float = ranged(0.0, Num(ge=-180, le=180))
+    dx_px: float = ranged(0.0, Num())
+    dy_px: float = ranged(0.0, Num())
 
     @property
     def is_identity(self) -> bool:
@@ -157,9 +162,9 @@ class CameraConfig:
 class MountConfig:
     """Rigid offset of the real sensor from the commanded pose (body frame, about the tip)."""
 
-    dz: float = 0.0  # m along the sensor axis; > 0 = deeper into the phantom than commanded
-    tilt_x_deg: float = 0.0
-    tilt_y_deg: float = 0.0
+    dz: float = ranged(0.0, Num())  # m along the sensor axis; > 0 = deeper into the phantom than commanded
+    tilt_x_deg: float = ranged(0.0, Num(ge=-90, le=90))
+    tilt_y_deg: float = ranged(0.0, Num(ge=-90, le=90))
 
     @property
     def is_identity(self) -> bool:
@@ -176,13 +181,13 @@ class MarkerConfig:
     the rest markers exactly where the real rest photo has them. 0 = the reference.
     """
 
-    anchor: float = 0.0
+    anchor: float = ranged(0.0, Num())
 
 
 @dataclass
 class HealthConfig:
-    max_abs_position: float = 2.0  # m (reference: |x| > 10 sim)
-    check_every: int = 1  # frames between health checks (reference: 20 in calibration)
+    max_abs_position: float = ranged(2.0, Num(gt=0))  # m (reference: |x| > 10 sim)
+    check_every: int = ranged(1, Int(ge=1))  # frames between health checks (reference: 20 in calibration)
 
 
 @dataclass
@@ -197,7 +202,7 @@ class TwinConfig:
     camera: CameraConfig = field(default_factory=CameraConfig)
     mount: MountConfig = field(default_factory=MountConfig)
     markers: MarkerConfig = field(default_factory=MarkerConfig)
-    device: str = "cpu"
+    device: str = ranged("cpu", Text())
 
     @property
     def layered(self) -> bool:
