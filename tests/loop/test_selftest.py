@@ -33,11 +33,12 @@ def test_cases_parse_and_dependencies_are_enforced():
 
 
 def test_unlisted_effects_move_markers_outside_the_candidates():
-    rest = rest_template()[None].astype(np.float64)
+    rest = rest_template().astype(np.float64)
+    pressed = (rest + 0.05 * (rest - rest.mean(axis=0)))[None]  # displaced: the physical kinds act on displacements
     rng = np.random.default_rng(0)
     for name, f in UNLISTED.items():
-        moved = f(rest.copy(), 1.0, rng)
-        assert moved.shape == rest.shape and np.abs(moved - rest).max() > 3.0, name
+        moved = f(pressed.copy(), 1.0, rng, rest)
+        assert moved.shape == pressed.shape and np.abs(moved - pressed).max() > 1.5, name
 
 
 def test_tiny_selftest_names_in_list_and_flags_out_of_list(tmp_path):

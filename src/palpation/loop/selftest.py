@@ -3,22 +3,24 @@
 Every run starts from the same twin as the real mode (no contact; `base_effects` on, none by default)
 and injects one *case*: a single effect, a dependent pair (friction with the surface contact it acts
 through), a pair of independent effects, or an effect outside the candidate list
-(`unlisted:<name>`: an image-space barrel distortion the camera similarity cannot express, and a skin
-defect that displaces a patch of markers), alone or with in-list ones. Strength per injected effect:
+(`unlisted:<name>`, from loop.unlisted: the fixed list has an image-space barrel distortion the camera
+similarity cannot express, and a skin defect that displaces a patch of markers), alone or with in-list
+ones. Strength per injected effect:
 s in [strength_low, strength_high] nominal steps (stratified over the case's runs; a multi-dof effect
 takes a random unit direction). Detector-like Gaussian noise `noise_px` per coordinate is added, the set
 is saved in the generic format and read back: the loop knows only the file. It must name the exact in-list
 set, and report `unexplained` exactly when an out-of-list effect is in the data (loop.unexplained).
 Every run of a batch advances in lockstep. Size: `cases` x `runs_per_case` (conf/loop/*.yaml).
+loop.generative draws its runs instead of taking them from the list, and shares everything after the draw.
 """
 
 from __future__ import annotations
 
 import logging
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Mapping
+from typing import Callable, Mapping
 
 import numpy as np
 
@@ -28,39 +30,14 @@ from palpation.loop.effects import EFFECTS, PARAMS, move
 from palpation.loop.engine import Problem, evaluate, initial_params, run_rounds
 from palpation.loop.inputs import Target
 from palpation.loop.real import make_problem
-from palpation.loop.residual import CENTRE_PX
 from palpation.loop.unexplained import check_all, noise_estimate
+from palpation.loop.unlisted import UNLISTED, UNLISTED_PREFIX
 from palpation.measured import MeasuredState, load_measured_set, make_measured_set, save_measured_set
 
 log = logging.getLogger(__name__)
 COLUMNS = ("run", "effects_injected", "strength", "effects_named", "mae_before_px", "mae_after_px",
            "excess_ratio")
-UNLISTED_PREFIX = "unlisted:"
 MAX_REDRAWS = 3  # a run whose injected twin diverges is drawn again this many times (simulate_injections)
-DISTORTION_RADIUS_PX = 400.0  # ~ the image circle's radius
-DISTORTION_K = 0.02  # barrel coefficient per nominal step: 8 px at r = 400 px per step
-DEFECT_MARKERS = 7  # a patch: a marker and its 6 neighbours
-DEFECT_PX = 4.0  # patch displacement per nominal step
-
-
-def _distortion(m: np.ndarray, s: float, rng) -> np.ndarray:
-    q = m - CENTRE_PX
-    r2 = (q ** 2).sum(axis=-1, keepdims=True) / DISTORTION_RADIUS_PX ** 2
-    return CENTRE_PX + q * (1.0 + DISTORTION_K * s * r2)
-
-
-def _defect(m: np.ndarray, s: float, rng) -> np.ndarray:
-    rest = m[0]
-    centre = rng.integers(len(rest))
-    patch = np.argsort(np.linalg.norm(rest - rest[centre], axis=1))[:DEFECT_MARKERS]
-    angle = rng.uniform(0, 2 * np.pi)
-    out = m.copy()
-    out[:, patch] += DEFECT_PX * s * np.array([np.cos(angle), np.sin(angle)])
-    return out
-
-
-# out-of-list effects: marker-space transforms of all states of a set, (S, 127, 2) -> same
-UNLISTED = {"image_distortion": _distortion, "marker_defect": _defect}
 
 
 @dataclass
@@ -73,10 +50,20 @@ class Injection:
     base_effects: list[str]
     params: dict[str, float]  # the twin that made the data
     redrawn: int = 0  # draws after the first (its twin diverged; simulate_injections)
+    # loop.generative: the run's name (problem, set file) and its own random stream, which makes its set (out-of-list
+    # draws, noise), so that a run is remade alone; the fixed self-test leaves both unset (one stream for all runs)
+    # and names runs by number
+    tag: str = ""
+    rng: np.random.Generator | None = field(default=None, repr=False, compare=False)
+    rest: np.ndarray | None = field(default=None, repr=False, compare=False)  # its twin's rest markers (unlisted)
 
     @property
     def label(self) -> str:
         return "+".join([*self.effects, *(UNLISTED_PREFIX + u for u in self.unlisted)])
+
+    @property
+    def name(self) -> str:
+        return self.tag or f"run{self.run:03d}"
 
 
 def parse_case(case: str, base_effects, where: str = "loop.selftest.cases") -> tuple[list[str], list[str]]:
@@ -126,14 +113,21 @@ def _draw(cfg: LoopConfig, base: Mapping[str, float], run: int, r: int, inl: lis
     for e in [*inl, *unl]:
         strengths[e] = float(st.strength_low + span * (r + rng.uniform()) / st.runs_per_case)
     for e in inl:
-        dofs = EFFECTS[e].dofs
-        u = rng.normal(size=len(dofs))
-        # "switched on": a one-dof effect grows; a multi-dof one (camera, mount) goes any way
-        u = np.where([d.nonneg or len(dofs) == 1 for d in dofs], np.abs(u), u) / np.linalg.norm(u)
-        for d, ui in zip(dofs, u):
-            betas[f"{e}.{d.name}"] = float(strengths[e] * ui)
-            params = move(params, d, betas[f"{e}.{d.name}"], steps)
+        params = switch_on(params, e, strengths[e], rng, steps, betas)
     return Injection(run, inl, unl, strengths, betas, on, params)
+
+
+def switch_on(params: Mapping[str, float], effect: str, strength: float, rng: np.random.Generator,
+              steps: Mapping[str, float], betas: dict[str, float]) -> dict[str, float]:
+    """`params` with `effect` moved `strength` nominal steps along a random unit direction over its dofs (its
+    betas land in `betas`). "Switched on": a one-dof effect grows; a multi-dof one (camera, mount) goes any way."""
+    dofs = EFFECTS[effect].dofs
+    u = rng.normal(size=len(dofs))
+    u = np.where([d.nonneg or len(dofs) == 1 for d in dofs], np.abs(u), u) / np.linalg.norm(u)
+    for d, ui in zip(dofs, u):
+        betas[f"{effect}.{d.name}"] = float(strength * ui)
+        params = move(params, d, betas[f"{effect}.{d.name}"], steps)
+    return dict(params)
 
 
 def redraw(inj: Injection, cfg: LoopConfig, base: Mapping[str, float], attempt: int) -> Injection:
@@ -147,10 +141,13 @@ def redraw(inj: Injection, cfg: LoopConfig, base: Mapping[str, float], attempt: 
 
 
 def simulate_injections(injections: list[Injection], states: list[Target], simulate, cfg: LoopConfig,
-                        base: Mapping[str, float]) -> np.ndarray:
+                        base: Mapping[str, float], draw_again: Callable[[Injection, int], Injection] | None = None
+                        ) -> np.ndarray:
     """Every injected twin at `states` (one batch): markers (runs, states, 127, 2). Strong draws can leave the
     twin's stable range (viscous near its top strength diverges on four of seeds 3-7): such a run is redrawn up to
-    MAX_REDRAWS times (injections is updated in place, the log says which), else the error stands."""
+    MAX_REDRAWS times (injections is updated in place, the log says which), else the error stands.
+    `draw_again(inj, attempt)` draws a run anew (default: `redraw`, the fixed self-test's; loop.generative's own)."""
+    draw_again = draw_again or (lambda inj, attempt: redraw(inj, cfg, base, attempt))
     n = len(states)
     markers, failed = simulate([(t.state, inj.params) for inj in injections for t in states])
     markers, failed = np.array(markers).reshape(len(injections), n, -1, 2), np.asarray(failed).reshape(-1, n)
@@ -161,25 +158,27 @@ def simulate_injections(injections: list[Injection], states: list[Target], simul
         log.warning("self-test: the twin diverged while making run(s) %s; drawn again (attempt %d)",
                     [injections[i].run for i in bad], attempt)
         for i in bad:
-            injections[i] = redraw(injections[i], cfg, base, attempt)
+            injections[i] = draw_again(injections[i], attempt)
         again, again_failed = simulate([(t.state, injections[i].params) for i in bad for t in states])
         markers[bad] = np.asarray(again).reshape(len(bad), n, -1, 2)
         failed[bad] = np.asarray(again_failed).reshape(-1, n)
     if failed.any():
         raise ValueError(f"self-test: the twin diverged while making run(s) "
                          f"{[injections[i].run for i in np.flatnonzero(failed.any(axis=1))]} after {MAX_REDRAWS} "
-                         "redraws; lower the strengths (loop.selftest.strength_high) or the nominal steps (loop.steps)")
+                         "redraws; lower the strengths (loop.selftest.strength_high, loop.generative.strengths) or the "
+                         "nominal steps (loop.steps)")
     return markers
 
 
 def make_sets(injections: list[Injection], markers: np.ndarray, states: list[Target], noise_px: float,
               rng: np.random.Generator, out_dir: Path, geometry: Mapping[str, MeasuredState],
               rest_px: np.ndarray) -> list[Path]:
-    """Each run's simulated markers (simulate_injections) -> out-of-list effects, noise -> a measured set on disk."""
+    """Each run's simulated markers (simulate_injections) -> out-of-list effects, noise -> a measured set on disk.
+    A run with its own stream (inj.rng) draws from it, else from the shared `rng`."""
     paths = []
     for inj, block in zip(injections, markers):
-        mset = _measured(inj, block, states, noise_px, rng, geometry, rest_px)
-        path = Path(out_dir) / f"run_{inj.run:03d}"
+        mset = _measured(inj, block, states, noise_px, rng if inj.rng is None else inj.rng, geometry, rest_px)
+        path = Path(out_dir) / (inj.tag or f"run_{inj.run:03d}")
         save_measured_set(path, mset)
         paths.append(path)
     return paths
@@ -189,14 +188,14 @@ def _measured(inj: Injection, block: np.ndarray, states: list[Target], noise_px:
               geometry: Mapping[str, MeasuredState], rest_px: np.ndarray):
     """One run's simulated markers (S, 127, 2) -> its measured set: out-of-list effects, then detector noise."""
     for u in inj.unlisted:
-        block = UNLISTED[u](block, inj.strengths[u], rng)
+        block = UNLISTED[u](block, inj.strengths[u], rng, inj.rest)
     noisy = block + rng.normal(0.0, noise_px, block.shape)
     return make_measured_set(noisy, np.ones(noisy.shape[:2], bool), rest_px, [geometry[t.name] for t in states],
                              source="palpation.loop.selftest", detector={"kind": "twin", "noise_px": noise_px})
 
 
 def remake_set(cfg: LoopConfig, base: Mapping[str, float], states: list[Target], simulate, run: int,
-               geometry: Mapping[str, MeasuredState], rest_px: np.ndarray):
+               geometry: Mapping[str, MeasuredState], rest_px: np.ndarray, rest_of=None):
     """(Injection, measured set) of self-test run `run` exactly as run_selftest makes it from loop.selftest.seed, with
     only that run simulated: the earlier runs' random draws (out-of-list effects, noise) are replayed on a dummy block
     (their count does not depend on the markers). For studying one run of a 60-run self-test on a CPU."""
@@ -207,35 +206,51 @@ def remake_set(cfg: LoopConfig, base: Mapping[str, float], states: list[Target],
                          "(loop.selftest.cases x runs_per_case)")
     dummy = np.zeros((len(states), *np.shape(states[0].markers)))
     for inj in injections[:run]:
+        inj.rest = dummy[0]  # the draws' count does not depend on the rest either
         _measured(inj, dummy, states, cfg.selftest.noise_px, rng, geometry, rest_px)
     batch = [injections[run]]
     block = simulate_injections(batch, states, simulate, cfg, base)[0]  # redrawn in place where it diverges
     inj = batch[0]
+    inj.rest = rest_of(inj.params) if rest_of else None
     return inj, _measured(inj, block, states, cfg.selftest.noise_px, rng, geometry, rest_px)
 
 
 def run_selftest(cfg: LoopConfig, simulate, base: Mapping[str, float], template: list[Target],
                  geometry: Mapping[str, MeasuredState], rest_px: np.ndarray, out_dir: Path, db_path: Path,
-                 tkey: str, progress: bool = False) -> tuple[list[dict], list[Problem], list[Injection]]:
-    """Make the sets, run the loop on each (it only reads the files), and score what it names."""
+                 tkey: str, progress: bool = False, rest_of: Callable[[Mapping[str, float]], np.ndarray] | None = None
+                 ) -> tuple[list[dict], list[Problem], list[Injection]]:
+    """Make the sets of the fixed case list, run the loop on each (it only reads the files), and score what it
+    names. `rest_of(params)`: a twin's rest markers, for out-of-list effects on displacements (loop.unlisted)."""
     cfg.validate()
     rng = np.random.default_rng(cfg.selftest.seed)
     injections = draw_injections(cfg, base, rng)
     markers = simulate_injections(injections, template, simulate, cfg, base)
+    for inj in injections:
+        inj.rest = rest_of(inj.params) if rest_of else None
     paths = make_sets(injections, markers, template, cfg.selftest.noise_px, rng, Path(out_dir) / "sets",
                       geometry, rest_px)
+    rows, problems = loop_on_sets(cfg, injections, paths, simulate, base, db_path, tkey, cfg.selftest.max_rounds,
+                                  progress)
+    return rows, problems, injections
+
+
+def loop_on_sets(cfg: LoopConfig, injections: list[Injection], paths: list[Path], simulate,
+                 base: Mapping[str, float], db_path: Path, tkey: str, max_rounds: int, progress: bool = False
+                 ) -> tuple[list[dict], list[Problem]]:
+    """The loop on every injected run's saved set, all in lockstep, from the run's starting twin (base_for): one
+    scored row per run (what was injected, what the loop named, the MAE before and after, the final check)."""
     problems, sigmas = [], {}
     for inj, path in zip(injections, paths):
         mset = load_measured_set(path)
         on, start = base_for(inj.effects, cfg, base)
-        p = make_problem(mset, str(path), cfg, {}, name=f"run{inj.run:03d}", holdout=cfg.selftest.holdout,
+        p = make_problem(mset, str(path), cfg, {}, name=inj.name, holdout=cfg.selftest.holdout,
                          states=cfg.selftest.states, effects_on=on, candidates=cfg.effects)
         p.params = dict(start)
         sigmas[p.name] = p.noise_px = noise_estimate(mset, cfg.noise_px)[0]
         problems.append(p)
     evaluate(problems, simulate)
     before = [p.summary() for p in problems]
-    run_rounds(problems, simulate, cfg, db_path, tkey, cfg.selftest.max_rounds, progress=progress)
+    run_rounds(problems, simulate, cfg, db_path, tkey, max_rounds, progress=progress)
     check_all(problems, simulate, cfg, sigmas)
     rows = []
     for inj, p, b in zip(injections, problems, before):
@@ -243,7 +258,7 @@ def run_selftest(cfg: LoopConfig, simulate, base: Mapping[str, float], template:
         unexplained = bool(p.final["test"]["unexplained"])
         named = [*added, *(["unexplained"] if unexplained else [])]
         rows.append({"run": inj.run, "effects_injected": inj.label,
-                     "strength": float(np.mean(list(inj.strengths.values()))),
+                     "strength": float(np.mean(list(inj.strengths.values()))) if inj.strengths else float("nan"),
                      "effects_named": "+".join(named) or "none", "mae_before_px": b["all"],
                      "mae_after_px": p.summary()["all"], "excess_ratio": p.final["test"]["excess_ratio"],
                      "injected_effects": inj.effects, "unlisted": inj.unlisted, "named": added,
@@ -258,7 +273,7 @@ def run_selftest(cfg: LoopConfig, simulate, base: Mapping[str, float], template:
                                 .get("why", "")} for r in p.rounds],
                      "injected": {k: inj.params[k] for e in inj.effects for k in EFFECTS[e].params},
                      "recovered": {k: p.params[k] for e in inj.effects for k in EFFECTS[e].params}})
-    return rows, problems, injections
+    return rows, problems
 
 
 def confusion(rows: list[dict], effects: list[str]) -> dict[str, dict[str, int]]:
