@@ -91,6 +91,42 @@ rule loop_selftest:
         LOOP_SHELL
 
 
+# The generative self-test (loop.generative): each run draws its truth (0-3 in-list effects, strengths, E, k_s, a
+# share with an outside effect). Split `dev` (seeds < 1000) while choosing mechanisms and thresholds; `test` once, at
+# the end. Finished runs are kept in general/{split}/generative/runs/ (deliberately not outputs, as the studies: a
+# killed run resumes there). Not in `rule all`: snakemake results/loop/general/dev/loop_selftest_general.csv
+rule loop_selftest_general:
+    input:
+        measured=rules.measured_photos.output.npz,
+        mesh=twin_mesh(),
+        conf=LOOP_CONF,
+    output:
+        csv=f"{LOOP_DIR}/general/{{split}}/loop_selftest_general.csv",
+        md=f"{LOOP_DIR}/general/{{split}}/selftest_general.md",
+        json=f"{LOOP_DIR}/general/{{split}}/selftest_general.json",
+    wildcard_constraints:
+        split="dev|test",
+    params:
+        rule="loop_selftest_general",
+        py=PY,
+        mode="generative",
+        preset=config["loop"]["preset"],
+        twin=lambda wildcards: f"{LOOP_TWIN} loop.generative.split={wildcards.split}".strip(),
+        measured=lambda wildcards, input: input.measured[: -len(".npz")],
+        out=lambda wildcards, output: Path(output.csv).parent,
+        hydra=lambda wildcards, output: hydra_dir(output.csv),
+    resources:
+        gpu=GPU,
+    log:
+        "results/logs/loop/loop_selftest_general_{split}.log",
+    benchmark:
+        "results/benchmarks/loop_selftest_general_{split}.tsv",
+    conda:
+        CONDA_ENV
+    shell:
+        LOOP_SHELL
+
+
 # The full self-test of issue 13 (>= 60 runs: 12 cases x 5, singles, dependent and independent pairs, two
 # out-of-list effects), beside the profile's own size; on a GPU with loop=paper it is one batch per twin call.
 rule loop_selftest_full:

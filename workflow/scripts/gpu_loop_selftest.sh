@@ -11,6 +11,10 @@
 # resumes (the sets are re-made from the seed, the studies continue in OUTDIR/selftest/study.journal).
 # On the lent device (10 min per command; $OUT is emptied before each), until it exits 0:
 #   LIMIT_S=560 bash workflow/scripts/gpu_loop_selftest.sh results/loop_gpu; cp results/loop_gpu/*.{csv,md,json,log} $OUT/
+# MODE=generative: the generative self-test (loop.generative) at loop=paper sizes instead, split SPLIT (dev, or test
+# once at the end) with RUNS drawn runs per seed (default 60); finished runs are kept in OUTDIR/generative/runs and
+# skipped by the same command again. Writes OUTDIR/loop_selftest_general.csv, selftest_general.{md,json}:
+#   MODE=generative SPLIT=dev LIMIT_S=560 bash workflow/scripts/gpu_loop_selftest.sh results/loop_gen
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/device_run.sh"
 out=${1:?usage: gpu_loop_selftest.sh OUTDIR [overrides...]}; shift
@@ -22,17 +26,23 @@ for f in "$mesh" "$measured.npz" "$measured.json"; do
 done
 export PYTHONPATH="$PWD/src${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 mkdir -p "$out"
-if ! device_attach "$out" selftest; then
+case "${MODE:-selftest}" in
+  selftest) name=selftest md=selftest.md head=9 sizes=(mode=selftest loop.selftest.runs_per_case="${RUNS:-5}") ;;
+  generative) name=generative md=selftest_general.md head=16
+    sizes=(mode=generative loop=paper loop.generative.split="${SPLIT:-dev}" loop.generative.runs="${RUNS:-60}") ;;
+  *) echo "gpu_loop_selftest: MODE must be selftest or generative, got '$MODE'" >&2; exit 2 ;;
+esac
+if ! device_attach "$out" "$name"; then
   device_check_warp gpu_loop_selftest cpu hydra optuna || exit 3
-  device_start "$out" selftest python3 -m palpation.apps.loop mode=selftest track=false progress=false twin.device=cuda \
-    mesh="$mesh" measured="$measured" loop.selftest.runs_per_case="${RUNS:-5}" loop.split_by_kind=false \
+  device_start "$out" "$name" python3 -m palpation.apps.loop "${sizes[@]}" track=false progress=false twin.device=cuda \
+    mesh="$mesh" measured="$measured" loop.split_by_kind=false \
     loop.final_refit_starts=3 loop.final_refit_iters=10 loop.compete=true loop.nested_starts=true loop.null_converge=true \
     loop.camera_grid_converged=true loop.projected_null=true loop.final_refit_regrid=2 loop.final_refit_off_starts=true \
     loop.search.ask_workers="${ASK_WORKERS:-$(nproc)}" out.dir="$out" \
     hydra.run.dir="$out/hydra" "$@"
 fi
-echo "loop self-test:"
-device_wait "$out" selftest
-grep -E "done in|Error|error" "$out/selftest.log" | tail -3
-[ -f "$out/selftest.md" ] && sed -n '3,9p' "$out/selftest.md"
+echo "loop self-test ($name):"
+device_wait "$out" "$name"
+grep -E "done in|Error|error" "$out/$name.log" | tail -3
+[ -f "$out/$md" ] && sed -n "3,${head}p" "$out/$md"
 exit $DEVICE_RC

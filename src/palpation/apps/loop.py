@@ -2,13 +2,16 @@
 
     python -m palpation.apps.loop                      the real photos: rounds, report, final twin
     python -m palpation.apps.loop mode=selftest        hidden effects in twin-made sets, confusion table
+    python -m palpation.apps.loop mode=generative loop.generative.split=dev    drawn truths (loop.generative)
     python -m palpation.apps.loop measured=<stem>      any measured set in the generic format
 
 Real mode writes under out.dir: report.md, loop_real.csv, rounds.json, twin_fit/fitted.yaml (the final
 twin, loaded downstream with hydra.searchpath=[file://<out.dir>] +twin_fit=fitted), fitted_params.yaml,
 modes.png/.pdf, rounds.png/.pdf, residuals/ (quivers per photo)
 and study.journal (the Optuna studies, resumable). Self-test mode: loop_selftest.csv, selftest.md,
-selftest.json and selftest/ (the generated sets and their study.journal).
+selftest.json and selftest/ (the generated sets and their study.journal). Generative mode:
+loop_selftest_general.csv, selftest_general.md, selftest_general.json and generative/ (runs/ one file per finished
+run, resumed from; sets/, study.journal).
 """
 
 from __future__ import annotations
@@ -29,6 +32,8 @@ from palpation.io import save_json, save_text
 from palpation.figures import loop as figures
 from palpation.loop import report
 from palpation.loop.config import LoopConfig
+from palpation.loop.generative import run_generative
+from palpation.loop.generative_report import write_outputs
 from palpation.loop.inputs import load_targets
 from palpation.loop.real import make_problem, run_loop, twin_key
 from palpation.loop.recalibrate import LOOP_STUDY
@@ -36,13 +41,14 @@ from palpation.loop.residual import decompose, image_direction_deg
 from palpation.loop.selftest import confusion, rows_csv, run_selftest, summary
 from palpation.loop.simulate import LoopSimulator, loop_twin_config
 from palpation.loop.start import nominal_projection, read_start, start_twin
+from palpation.loop.unlisted import twin_rest
 from palpation.markers.template import rest_template
 from palpation.measured import load_measured_set
 from palpation.twin.config import TwinConfig
 from palpation.twin.mesh import SensorMesh
 
 log = logging.getLogger(__name__)
-MODES = ("real", "selftest")
+MODES = ("real", "selftest", "generative")
 RANGES = {"mode": Choice(*MODES)}  # the loop's and twin's settings: on LoopConfig, TwinConfig
 
 
@@ -83,6 +89,8 @@ def run(cfg: DictConfig) -> dict:
         make_problem(mset, source, loop, start_params, effects_on=effects_on)
     else:
         load_targets(mset, source, loop.selftest.holdout, loop.selftest.states, loop.twist_z_angle)
+        if cfg.mode == "generative":
+            loop.generative.validate(loop)
     mesh = SensorMesh.load(cfg.mesh)
     tw = loop_twin_config(nominal_projection(twin), loop.shell_thickness_mm * 1e-3)
     sim = LoopSimulator(mesh, tw, rest_template(), device=twin.device, split_by_kind=loop.split(twin.device),
@@ -91,8 +99,10 @@ def run(cfg: DictConfig) -> dict:
     start = time.perf_counter()
     if cfg.mode == "real":
         result = run_real(cfg, loop, tw, mset, source, sim, tkey, out, mesh.resolution, start_params, effects_on)
-    else:
+    elif cfg.mode == "selftest":
         result = run_self(cfg, loop, tw, mset, source, sim, tkey, out, start_params)
+    else:
+        result = run_general(cfg, loop, mset, source, sim, tkey, out, start_params)
     result.update({"wall_s": time.perf_counter() - start, "envs_simulated": sim.envs_simulated,
                    "envs_cached": sim.cache_hits, "twin_calls": sim.calls, "twin_s": sim.sim_s,
                    "env_frames": sim.env_frames, "span_frames": sim.span_frames, "cached_frames": sim.cached_frames})
@@ -159,10 +169,12 @@ def run_self(cfg, loop: LoopConfig, tw, mset, source, sim, tkey, out: Path, star
     st = loop.selftest
     template = load_targets(mset, source, [], st.states, loop.twist_z_angle)
     geometry = {s.name: s for s in mset.states}
+    binding_rest = sim.binding({}).anchor_px  # the nominal twin's rest markers (outside effects on displacements)
     with _tracked(cfg, "selftest"):
         rows, _, _ = run_selftest(loop, sim.simulate, start, template, geometry, mset.rest,
                                   out / "selftest", out / "selftest" / LOOP_STUDY, tkey,
-                                  progress=bool(cfg.progress))
+                                  progress=bool(cfg.progress),
+                                  rest_of=lambda p: twin_rest(binding_rest, sim.template, p))
         table = confusion(rows, loop.effects)
         summ = summary(rows)
         save_text(out / "loop_selftest.csv", rows_csv(rows))
@@ -180,6 +192,26 @@ def run_self(cfg, loop: LoopConfig, tw, mset, source, sim, tkey, out: Path, star
             for path in (out / "loop_selftest.csv", out / "selftest.md"):
                 log_artifact(path)
     return {"summary": summ, "confusion": table, "rows": rows}
+
+
+def run_general(cfg, loop: LoopConfig, mset, source, sim, tkey, out: Path, start: dict) -> dict:
+    st = loop.selftest
+    template = load_targets(mset, source, [], st.states, loop.twist_z_angle)
+    geometry = {s.name: s for s in mset.states}
+    binding_rest = sim.binding({}).anchor_px  # the nominal twin's rest markers (outside effects on displacements)
+    with _tracked(cfg, "generative"):
+        rows = run_generative(loop, sim.simulate, start, template, geometry, mset.rest, out / "generative",
+                              out / "generative" / LOOP_STUDY, tkey, lambda p: twin_rest(binding_rest, sim.template, p),
+                              progress=bool(cfg.progress))
+        summ = write_outputs(out, rows, loop)
+        for split, s in summ.items():
+            if isinstance(s, dict):
+                _log({f"{split}/{k}": float(v) for k, v in s.items() if isinstance(v, (int, float))}, None, cfg.track)
+        if cfg.track:
+            from palpation.tracking import log_artifact
+            for path in (out / "loop_selftest_general.csv", out / "selftest_general.md"):
+                log_artifact(path)
+    return {"summary": summ, "rows": rows}
 
 
 def _plain(r: dict) -> dict:

@@ -9,6 +9,7 @@ from hydra.core.config_store import ConfigStore
 
 from palpation.config_ranges import SEED, Choice, DictOf, Int, ListOf, Num, Text, ranged
 from palpation.loop.effects import EFFECTS, PARAMS, check_effects
+from palpation.loop.generative_config import GenerativeConfig
 from palpation.loop.inputs import TWIST_Z_ANGLES
 
 SAMPLERS = ("gp", "tpe", "random")
@@ -166,6 +167,7 @@ class LoopConfig:
     steps: dict[str, float] = ranged(rule=DictOf(Num(gt=0)), factory=dict)
     search: SearchSettings = field(default_factory=SearchSettings)
     selftest: SelftestConfig = field(default_factory=SelftestConfig)
+    generative: GenerativeConfig = field(default_factory=GenerativeConfig)  # drawn truths (loop.generative)
     split_by_kind: str = "auto"  # one twin batch per kind: auto (= on the CPU), true, false
     max_frames: Optional[int] = ranged(None, Int(ge=1, null=True))  # cut every trajectory (smoke tests only)
 
