@@ -11,9 +11,10 @@
 # resumes (the sets are re-made from the seed, the studies continue in OUTDIR/selftest/study.journal).
 # On the lent device (10 min per command; $OUT is emptied before each), until it exits 0:
 #   LIMIT_S=560 bash workflow/scripts/gpu_loop_selftest.sh results/loop_gpu; cp results/loop_gpu/*.{csv,md,json,log} $OUT/
-# MODE=generative: the generative self-test (loop.generative) at loop=paper sizes instead, split SPLIT (dev, or test
-# once at the end) with RUNS drawn runs per seed (default 60); finished runs are kept in OUTDIR/generative/runs and
-# skipped by the same command again. Writes OUTDIR/loop_selftest_general.csv, selftest_general.{md,json}:
+# MODE=generative: the generative self-test (loop.generative) at loop=PRESET sizes (default paper) instead, split
+# SPLIT (dev, or test once at the end) with RUNS drawn runs per seed (default 60); finished runs are kept in
+# OUTDIR/generative/runs and skipped by the same command again. Writes OUTDIR/loop_selftest_general.csv and
+# selftest_general.{md,json}:
 #   MODE=generative SPLIT=dev LIMIT_S=560 bash workflow/scripts/gpu_loop_selftest.sh results/loop_gen
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/device_run.sh"
@@ -29,7 +30,8 @@ mkdir -p "$out"
 case "${MODE:-selftest}" in
   selftest) name=selftest md=selftest.md head=9 sizes=(mode=selftest loop.selftest.runs_per_case="${RUNS:-5}") ;;
   generative) name=generative md=selftest_general.md head=16
-    sizes=(mode=generative loop=paper loop.generative.split="${SPLIT:-dev}" loop.generative.runs="${RUNS:-60}") ;;
+    sizes=(mode=generative loop="${PRESET:-paper}" loop.generative.split="${SPLIT:-dev}"
+           loop.generative.runs="${RUNS:-60}") ;;
   *) echo "gpu_loop_selftest: MODE must be selftest or generative, got '$MODE'" >&2; exit 2 ;;
 esac
 if ! device_attach "$out" "$name"; then
