@@ -1,4 +1,4 @@
-"""Atomic writers: an output either exists complete or not at all.
+"""Atomic writers: an output either exists complete or not at all (the checked readers: palpation.readers).
 
 Every file is written to a temporary sibling and renamed into place, so a killed job never
 leaves a half-written file that Snakemake or a later reader could take for a finished one. The
@@ -16,8 +16,6 @@ import json
 import os
 import socket
 import tempfile
-import zipfile
-import zlib
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -99,39 +97,6 @@ def hard_link(src: str | os.PathLike, dest: str | os.PathLike) -> bool:
 def save_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
     with atomic_path(path, suffix=".npz") as tmp:
         np.savez_compressed(tmp, **arrays)
-
-
-def read_npz(path: str | os.PathLike, keys: tuple[str, ...] = (), fix: str = "rerun the rule that writes it",
-             finite: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
-    """All arrays of an npz, or a one-line ValueError naming `path` and `fix` when it is missing keys,
-    truncated or corrupt, or when one of the `finite` arrays holds NaN/inf."""
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"{path} not found; {fix}")
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
-        raise ValueError(f"{path} is not a readable npz archive ({type(exc).__name__}: {exc}); {fix}") from None
-    missing = [k for k in keys if k not in arrays]
-    if missing:
-        raise ValueError(f"{path} lacks the arrays {missing}; {fix}")
-    for key in finite:
-        bad = np.size(arrays[key]) - np.count_nonzero(np.isfinite(arrays[key]))
-        if bad:
-            raise ValueError(f"{path}: `{key}` holds {bad} NaN/inf values; {fix}")
-    return arrays
-
-
-def read_json(path: str | os.PathLike, fix: str = "rerun the rule that writes it") -> Any:
-    """A JSON file's content, or a one-line error naming `path` and `fix` (missing, truncated, invalid)."""
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"{path} not found; {fix}")
-    try:
-        return json.loads(path.read_text())
-    except (UnicodeDecodeError, ValueError) as exc:
-        raise ValueError(f"{path} is not valid JSON ({exc}); {fix}") from None
 
 
 def strict_json(obj: Any) -> tuple[Any, list[str]]:

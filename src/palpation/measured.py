@@ -21,7 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from palpation.io import read_npz, save_json, save_npz
+from palpation.io import save_json, save_npz
+from palpation.readers import read_json, read_npz
 from palpation.markers.lattice import N_MARKERS
 
 FORMAT_NAME = "palpation.measured_markers"
@@ -89,7 +90,10 @@ def parse_photo_name(filename: str | os.PathLike) -> dict[str, Any]:
     kind, depth = m["kind"], float(m["depth"])
     if kind == "press" and depth == 0:
         kind = "rest"  # touching without pressing: the background / displacement reference
-    angle = float(m["angle"]) if kind.startswith("twist") and m["angle"] else None
+    if kind.startswith("twist") and not m["angle"]:  # the twin would silently twist by SPEC's canonical angle
+        raise ValueError(f"{filename}: a {kind} photo name needs its angle ('_angle=<deg>'); rename the photo or "
+                         "list it in a photos_manifest with its angle")
+    angle = float(m["angle"]) if kind.startswith("twist") else None
     return {"trajectory": kind, "depth_mm": depth, "angle_deg": angle}
 
 
@@ -209,10 +213,7 @@ def load_measured_set(path: str | os.PathLike) -> MeasuredSet:
                                     "(see docs/measured_format.md)")
     arrays = read_npz(npz_path, fix="re-save it with palpation.measured.save_measured_set (or rerun its rule)")
     _check_arrays(arrays, npz_path)
-    try:
-        meta = json.loads(json_path.read_text())
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"{json_path}: not valid JSON ({exc}); fix or re-save it") from None
+    meta = read_json(json_path, "fix or re-save it with palpation.measured.save_measured_set", kind=dict)
     states = _check_meta(meta, arrays["markers"].shape[0], json_path)
     extra = {k: v for k, v in meta.items() if k not in {"format", "format_version", "states"}}
     return MeasuredSet(markers=arrays["markers"].astype(np.float32),

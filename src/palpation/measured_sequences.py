@@ -20,7 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from palpation.io import read_npz, save_json, save_npz
+from palpation.io import save_json, save_npz
+from palpation.readers import read_json, read_npz
 from palpation.markers.lattice import N_MARKERS
 from palpation.measured import DISPLACEMENT_TOL_PX
 
@@ -199,10 +200,7 @@ def load_sequence_set(path) -> SequenceSet:
                                     "(docs/measured_format.md)")
     a = read_npz(npz_path, fix=FIX)
     _check_arrays(a, npz_path)
-    try:
-        meta = json.loads(json_path.read_text())
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"{json_path}: not valid JSON ({exc}); fix or re-save it") from None
+    meta = read_json(json_path, "fix or re-save it with palpation.measured_sequences.save_sequence_set", kind=dict)
     _check_meta(meta, a, json_path)
     extra = {k: v for k, v in meta.items() if k not in {"format", "format_version", "trials", "vessels"}}
     return SequenceSet(a["markers"].astype(np.float32), a["displacement"].astype(np.float32),

@@ -156,7 +156,7 @@ def test_photo_not_an_image(tmp_path, fault):
 
     path = tmp_path / "sensor_default_state.png"
     path.write_bytes(b"not a png")
-    with fault(FileNotFoundError, str(path), "not an image file"):
+    with fault(ValueError, str(path), "not an image file"):
         load_gray(path)
 
 

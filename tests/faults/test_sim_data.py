@@ -55,7 +55,7 @@ def test_listed_trajectory_missing(sim, fault):
 def test_manifest_not_json(sim, fault):
     """a truncated Sim manifest"""
     sim.write_text(sim.read_text()[:25])
-    with fault(ValueError, str(sim), "not readable JSON", "rerun the simulate_dataset rule"):
+    with fault(ValueError, str(sim), "not valid JSON", "rerun the simulate_dataset rule"):
         load_sim(sim, "train")
 
 

@@ -6,7 +6,8 @@ import yaml
 from omegaconf import OmegaConf
 
 from palpation.apps.twin_judge import choice
-from palpation.io import read_json, save_json, save_text
+from palpation.io import save_json, save_text
+from palpation.readers import read_json
 
 CAL = [3.5805, 1.3109, 1.3395, 1.3053, 1.5289, 1.5805, 2.8424, 1.7956, 1.4164, 1.5782]  # 26 Nov paper replays
 TIED = [m + (1e-4 if i % 2 else -1e-4) for i, m in enumerate(CAL)]  # a tie: lower on half the trials, higher on half

@@ -31,7 +31,7 @@ def test_render_writes_figure_and_videos(tmp_path):
 
 def test_missing_manifest_is_named(tmp_path):
     cfg = OmegaConf.create({"manifests": [str(tmp_path / "none" / "manifest.json")], "out": {"dir": str(tmp_path)}})
-    with pytest.raises(FileNotFoundError, match="none/manifest.json does not exist; run the simulate stage"):
+    with pytest.raises(FileNotFoundError, match="none/manifest.json not found; run the simulate stage"):
         render_twin.run(cfg)
 
 

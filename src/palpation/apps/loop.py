@@ -70,11 +70,10 @@ def run(cfg: DictConfig) -> dict:
         raise ValueError(f"mode must be one of {MODES}, got '{cfg.mode}'")
     twin_node = cfg.twin
     if cfg.get("start"):  # a starting twin file (e.g. an earlier loop's twin_fit/fitted.yaml) over cfg.twin
+        start_file = read_start(cfg.start)  # raises its own one-line errors
         try:
-            twin_node = OmegaConf.merge(cfg.twin, read_start(cfg.start))
+            twin_node = OmegaConf.merge(cfg.twin, start_file)
         except Exception as exc:  # omegaconf: unknown key or wrong type in the file
-            if isinstance(exc, ValueError) and str(exc).startswith("loop start="):
-                raise
             raise ValueError(f"loop start={cfg.start}: {str(exc).splitlines()[0]}; the file must hold twin "
                              "sections and fields only (python -m palpation.apps.loop --cfg job lists them)") from None
     twin: TwinConfig = OmegaConf.to_object(twin_node)

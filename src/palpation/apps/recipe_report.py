@@ -23,7 +23,8 @@ from palpation.apps.vessel_maps import silicone_layout, source_for
 from palpation.config_check import app_main
 from palpation.config_ranges import SEEDS, Choice, Int, ListOf, Num, Text
 from palpation.figures.recipe import reliability_figure, uncertainty_figure
-from palpation.io import atomic_path, read_json, save_figure, save_json, save_npz, save_text
+from palpation.io import atomic_path, save_figure, save_json, save_npz, save_text
+from palpation.readers import read_json
 from palpation.mapping.pipeline import TEST_DATASET, MapSettings, config_maps
 from palpation.mapping.uncertainty import ensemble_map
 from palpation.metrics.calibration import ece, positive_share

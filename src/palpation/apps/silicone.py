@@ -24,6 +24,7 @@ from palpation.config_check import app_main
 from palpation.config_ranges import Choice, Int, ListOf, Num
 from palpation.io import save_figure, save_json, save_npz
 from palpation.markers.template import rest_template
+from palpation.readers import read_npz
 from palpation.realdata import silicone as sil
 from palpation.realdata.silicone_check import check_labels
 
@@ -74,8 +75,9 @@ def _build(cfg: DictConfig) -> dict:
 
 
 def _check(cfg: DictConfig) -> dict:
-    with np.load(cfg.out.npz) as data:
-        markers, labels, distance = data["markers"], data["labels"], data["chord_distance_px"]
+    data = read_npz(cfg.out.npz, ("markers", "labels", "chord_distance_px"), "rebuild it with task=set",
+                    "Silicone set", shapes={"markers": (None, None, sil.N_MARKERS, 2)})
+    markers, labels, distance = data["markers"], data["labels"], data["chord_distance_px"]
     if markers.shape[:2] != (sil.N_VIDEOS, sil.N_FRAMES):
         raise ValueError(f"{cfg.out.npz}: the check needs the full set (10 videos x 16 frames), got "
                          f"{markers.shape[:2]}; rebuild it with task=set and the default videos")

@@ -16,7 +16,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from palpation.config_check import app_main
 from palpation.config_ranges import DictOf, Num
-from palpation.io import read_npz
+from palpation.readers import read_npz
 from palpation.mapping import silicone_sequences as seq
 from palpation.mapping.silicone_poses import SweepLayout
 from palpation.markers.template import rest_template

@@ -21,7 +21,7 @@ from palpation.config_check import app_main
 from palpation.config_ranges import SEED, Choice, Int, ListOf, Num, Text
 from palpation.twin.config import REF_LENGTH_SCALE, TwinConfig, from_reference_units
 from palpation.twin.mesh import SensorMesh
-from palpation.twin.output import copy_outputs, write_outputs
+from palpation.twin.output import copy_outputs, read_sim_manifest, write_outputs
 from palpation.twin.runner import EnvRequest, run_batches
 
 log = logging.getLogger(__name__)
@@ -88,12 +88,8 @@ def request_key(cfg: DictConfig, k_n_range: tuple[float, float]) -> str:
 def reusable(paths, key: str) -> Path | None:
     """The first manifest of `paths` (config `reuse`) whose set was made from the same request key, else None."""
     for path in paths or []:
-        path = Path(path)
-        try:
-            meta = json.loads(path.read_text())
-        except (OSError, ValueError) as err:
-            raise FileNotFoundError(f"config reuse: {path} is not a readable Sim-set manifest ({err}); "
-                                    "name manifest.json files of finished sets, or reuse=[]") from None
+        meta, _ = read_sim_manifest(path, "name manifest.json files of finished sets in `reuse`, or reuse=[]",
+                                    allow_empty=True)
         if meta.get("request_key") == key and not meta.get("failed"):
             return path
     return None
@@ -101,6 +97,7 @@ def reusable(paths, key: str) -> Path | None:
 
 def run(cfg: DictConfig) -> dict:
     twin: TwinConfig = OmegaConf.to_object(cfg.twin)
+    mesh = SensorMesh.load(cfg.mesh)  # checked first: its bytes are hashed into the request key
     # quirk 4: optionally centre the k_n draws on the twin's (fitted) k_n, in reference units
     centre = twin.contact.k_n * REF_LENGTH_SCALE if cfg.dataset.recentre_k_n else None
     k_n_range = k_n_draw_range(centre)
@@ -109,9 +106,8 @@ def run(cfg: DictConfig) -> dict:
     if same is not None:  # the same trajectories exist (e.g. the chosen twin's candidate set): copy, not re-simulate
         manifest = copy_outputs(same, cfg.out.dir, {"reused_from": str(same)})
         log.info("same request key as %s: its files copied to %s, nothing simulated", same, cfg.out.dir)
-        return _tracked(cfg, {"manifest": str(manifest), "n_files": len(json.loads(manifest.read_text())["files"]),
+        return _tracked(cfg, {"manifest": str(manifest), "n_files": len(read_sim_manifest(manifest)[1]),
                               "n_failed": 0, "reused": 1})
-    mesh = SensorMesh.load(cfg.mesh)
     requests = trajectory_set(cfg.set, cfg.seed, cfg.n_pairs, cfg.heading_offset_deg, k_n_range)
     records, failed = [], []
     start = time.perf_counter()

@@ -25,7 +25,8 @@ from omegaconf import DictConfig, OmegaConf
 from palpation.apps.slide_loop import select
 from palpation.config_check import app_main
 from palpation.config_ranges import SEEDS, Choice, DictOf, Int, ListOf
-from palpation.io import csv_text, read_json, read_npz, save_json, save_npz, save_text
+from palpation.io import csv_text, save_json, save_npz, save_text
+from palpation.readers import read_json, read_npz, read_text
 from palpation.loop.folds import FOLDS, trial_folds
 from palpation.loop.slide_diagnosis import BOUNDS_COLUMNS, drift_bounds
 from palpation.loop.slide_twins import (heldout_trials, read_slide_loop, scene_params, schedule_of, score,
@@ -130,7 +131,7 @@ def choice(cfg: DictConfig) -> dict:
     if folds:
         rec["note"] = (f"fold {folds[0]}'s twin, fitted on that fold's Silicone trials: the main tables' Silicone "
                        "scores are then not cross-fitted for them (the judge's table is)")
-    text = Path(rec["fit"]).read_text()
+    text = read_text(rec["fit"], f"pass fits.{source}=<dir>/twin_fit/fitted.yaml of a finished run", "fitted twin")
     head, _, body = text.partition("\n")
     if not head.startswith("# @package"):
         raise ValueError(f"{rec['fit']}: not a twin option (first line {head!r}, need '# @package twin'); "

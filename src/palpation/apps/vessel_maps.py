@@ -10,7 +10,6 @@ silicone_pose_check.json.
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
 from pathlib import Path
 
@@ -30,6 +29,7 @@ from palpation.mapping.silicone_poses import SweepLayout, direction_evidence, es
 from palpation.mapping.sources import meat_source, sim_source, silicone_source
 from palpation.metrics.aggregate import best_of_five
 from palpation.metrics.scores import load_scores
+from palpation.readers import read_json, read_npz
 from palpation.report.runs import run_dir
 from palpation.report.tables import table4_maps, table4_maps_markdown, table4_maps_row
 
@@ -47,7 +47,9 @@ def pick_run(c: dict, config: str) -> dict:
         if not (d / "metrics.json").exists():
             missing.append(str(d / "metrics.json"))
             continue
-        test = json.loads((d / "metrics.json").read_text())["test"]
+        test = read_json(d / "metrics.json", "rerun the train rule for this run", keys=("test",))["test"]
+        if not isinstance(test, dict) or not {"ap", "auroc"} <= test.keys():
+            raise ValueError(f"{d / 'metrics.json'}: `test` lacks ap/auroc; rerun the train rule for this run")
         runs.append({"seed": seed, "ap": test["ap"], "auroc": test["auroc"], "dir": str(d)})
     if not runs:
         raise FileNotFoundError(f"{config}: no training run found ({missing[:2]}); train it first or pass "
@@ -59,8 +61,8 @@ def pick_run(c: dict, config: str) -> dict:
 def silicone_layout(c: dict) -> tuple[SweepLayout, dict]:
     """The sweep layout of the config; a null mirror_sum is measured from the annotation dots."""
     fields = {k: v for k, v in c["silicone_layout"].items() if v is not None}
-    with np.load(c["data"]["silicone"]) as z:
-        arrays = {k: z[k] for k in ("markers", "labels", "dots", "dot_counts", "line_angle_deg")}
+    arrays = read_npz(c["data"]["silicone"], ("markers", "labels", "dots", "dot_counts", "line_angle_deg"),
+                      "rerun the silicone_set rule", "Silicone set", finite=("markers", "line_angle_deg"))
     evidence = {"directions": direction_evidence(arrays["markers"], arrays["dots"], arrays["dot_counts"],
                                                  arrays["line_angle_deg"])}
     if "mirror_sum" not in fields:

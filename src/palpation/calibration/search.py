@@ -12,15 +12,19 @@ is the one an uninterrupted search would have made.
 from __future__ import annotations
 
 import base64
+import json
 import logging
 import math
 import pickle
+import sqlite3
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
 import optuna
 from optuna.trial import TrialState
+
+from palpation.readers import one_line
 
 log = logging.getLogger(__name__)
 SAMPLER_ATTR = "sampler_state"  # study user attrs: the pickled sampler after the last batch's asks
@@ -89,8 +93,17 @@ def open_study(db_path: Path, name: str, sampler: optuna.samplers.BaseSampler,
                direction: str) -> optuna.Study:
     db_path.parent.mkdir(parents=True, exist_ok=True)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    study = optuna.create_study(storage=study_storage(db_path), study_name=name, sampler=sampler,
-                                direction=direction, load_if_exists=True)
+    try:
+        study = optuna.create_study(storage=study_storage(db_path), study_name=name, sampler=sampler,
+                                    direction=direction, load_if_exists=True)
+    except Exception as exc:
+        # a journal line that is not JSON, or a .db that is not SQLite; a locked database is not damage
+        orig = getattr(exc, "orig", None)
+        not_sqlite = isinstance(orig, sqlite3.DatabaseError) and not isinstance(orig, sqlite3.OperationalError)
+        if isinstance(exc, (json.JSONDecodeError, UnicodeDecodeError)) or not_sqlite:
+            raise ValueError(f"study file {db_path} is damaged ({one_line(orig or exc)}); delete it to start the "
+                             "search afresh (its trials are then simulated again)") from None
+        raise
     state = study.user_attrs.get(SAMPLER_ATTR)
     if state is not None:
         try:

@@ -9,13 +9,13 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from palpation.io import read_npz
+from palpation.readers import read_json, read_npz
+from palpation.twin.output import SIM_FIX, read_sim_manifest
 from palpation.markers.lattice import N_MARKERS
 
 SPLITS = ("train", "val", "test", "all")
@@ -53,32 +53,10 @@ def split_sorted(ids: list, split: str, fractions=(0.7, 0.85)) -> list:
 
 
 def sim_trajectory_files(manifest: str | Path) -> list[Path]:
-    """The trajectory files the manifest names (`trajectories`/`files`: names or {file|path}), and
-    only those: other npz files in the folder (a previous run's) are never read. An empty list (every
-    trajectory of the run diverged) is refused."""
-    manifest = Path(manifest)
-    if not manifest.exists():
-        raise FileNotFoundError(f"Sim manifest {manifest} not found; run the simulate_dataset rule first")
-    try:
-        meta = json.loads(manifest.read_text())
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"Sim manifest {manifest} is not readable JSON ({exc}); rerun the simulate_dataset "
-                         "rule to rewrite it") from None
-    entries = meta.get("trajectories", meta.get("files")) if isinstance(meta, dict) else meta
-    if not isinstance(entries, list) or not entries:
-        failed = len(meta.get("failed", [])) if isinstance(meta, dict) else 0
-        raise ValueError(f"Sim manifest {manifest} lists no trajectory files ({failed} failed); rerun the "
-                         "simulate_dataset rule (check its log for diverged environments)")
-    names = [e if isinstance(e, str) else e.get("file", e.get("path")) if isinstance(e, dict) else None
-             for e in entries]
-    if not all(isinstance(n, str) for n in names):
-        raise ValueError(f"Sim manifest {manifest}: every entry needs a file name; rerun the simulate_dataset rule")
-    files = [manifest.parent / n for n in names]
-    missing = [str(f) for f in files if not f.exists()]
-    if missing:
-        raise FileNotFoundError(f"Sim manifest {manifest}: trajectory files missing: {missing[:3]}; rerun the "
-                                "simulate_dataset rule")
-    return files
+    """The trajectory files the manifest names, and only those: other npz files in the folder (a previous
+    run's) are never read. An empty list (every trajectory of the run diverged) is refused
+    (twin.output.read_sim_manifest, the reader of the format)."""
+    return read_sim_manifest(manifest)[1]
 
 
 def load_sim(manifest: str | Path, split: str, stride: int = SIM_STRIDE) -> Sequences:
@@ -86,8 +64,8 @@ def load_sim(manifest: str | Path, split: str, stride: int = SIM_STRIDE) -> Sequ
     ids = split_sorted(list(files), split)
     markers, centreline, contact = [], [], []
     for sid in ids:
-        z = read_npz(files[sid], ("markers", "centreline_px", "contact"), "rerun the simulate_dataset rule",
-                     finite=("markers", "centreline_px"))
+        z = read_npz(files[sid], ("markers", "centreline_px", "contact"), SIM_FIX, finite=("markers", "centreline_px"),
+                     shapes={"markers": (None, N_MARKERS, 2), "centreline_px": (None, None, 2), "contact": (None,)})
         markers.append(z["markers"].astype(np.float32))
         centreline.append(z["centreline_px"].astype(np.float32))
         contact.append(z["contact"].astype(bool))
@@ -95,14 +73,12 @@ def load_sim(manifest: str | Path, split: str, stride: int = SIM_STRIDE) -> Sequ
 
 
 def load_silicone(path: str | Path) -> Sequences:
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"Silicone data {path} not found; run the real-data extraction rule first")
-    z = read_npz(path, ("markers", "labels"), "rerun the silicone_set rule", finite=("markers",))
+    z = read_npz(path, ("markers", "labels"), "rerun the silicone_set rule", "Silicone set", finite=("markers",),
+                 shapes={"markers": (None, None, N_MARKERS, 2)})
     markers, labels = z["markers"].astype(np.float32), z["labels"].astype(np.int8)
-    if markers.ndim != 4 or labels.shape != markers.shape[:3]:
-        raise ValueError(f"{path}: expected markers (N,T,127,2) and labels (N,T,127), got "
-                         f"{markers.shape} and {labels.shape}")
+    if labels.shape != markers.shape[:3]:
+        raise ValueError(f"Silicone set {path}: labels {labels.shape} do not match markers {markers.shape}; rerun "
+                         "the silicone_set rule")
     ids = [f"silicone_{i:02d}" for i in range(len(markers))]
     return Sequences("silicone", ids, list(markers), 1, labels=list(labels))
 
@@ -118,17 +94,21 @@ def load_meat(path: str | Path, split: str) -> Sequences:
     """
     path = Path(path)
     layout = path.with_suffix(".json")
-    for f in (path, layout):
-        if not f.exists():
-            raise FileNotFoundError(f"Meat data {f} not found; run the meat rule (palpation.apps.meat) first")
     if split not in ("train", "val", "all"):
         raise ValueError(f"Meat split must be train, val or all, got '{split}'")
-    trials = json.loads(layout.read_text())["trials"]
-    z = read_npz(path, ("markers", "labels", "trial_offsets"), "rerun the meat_set rule", finite=("markers",))
+    fix = "rerun the meat_set rule"
+    trials = read_json(layout, fix, "Meat layout", keys=("trials",))["trials"]
+    if not isinstance(trials, list) or not all(isinstance(r, dict) and {"split", "trial_id"} <= r.keys()
+                                               for r in trials):
+        raise ValueError(f"Meat layout {layout}: `trials` must be a list of rows with `trial_id` and `split`; {fix}")
+    z = read_npz(path, ("markers", "labels", "trial_offsets"), fix, "Meat set", finite=("markers",),
+                 shapes={"markers": (None, N_MARKERS, 2), "labels": (None, N_MARKERS), "trial_offsets": (None,)},
+                 dtypes={"trial_offsets": "iu"})
     markers, labels, offsets = z["markers"].astype(np.float32), z["labels"].astype(np.int8), z["trial_offsets"]
-    if len(offsets) != len(trials) + 1 or offsets[-1] != len(markers):
-        raise ValueError(f"{path}: trial_offsets {offsets.tolist()} do not cut {len(markers)} states into "
-                         f"the {len(trials)} trials of {layout}")
+    if (len(offsets) != len(trials) + 1 or offsets[0] != 0 or offsets[-1] != len(markers)
+            or np.any(np.diff(offsets) < 0)):
+        raise ValueError(f"Meat set {path}: trial_offsets {offsets.tolist()[:12]} do not cut {len(markers)} states "
+                         f"into the {len(trials)} trials of {layout}; {fix}")
     keep = [(t, a, b) for t, a, b in zip(trials, offsets[:-1], offsets[1:]) if split in ("all", t["split"])]
     if not keep:
         raise ValueError(f"{path}: no Meat trials in split '{split}'")

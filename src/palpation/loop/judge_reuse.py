@@ -21,6 +21,7 @@ from pathlib import Path
 import yaml
 
 from palpation.io import save_json, save_text
+from palpation.readers import read_yaml
 
 KEPT = ("scores.npz", "metrics.json")
 
@@ -33,7 +34,8 @@ def reuse(src: str | Path, dest: str | Path, twin: str) -> dict:
         if not path.exists():
             raise ValueError(f"judge_reuse: {path} missing: SRC must be an earlier judge run's results folder "
                              f"(rule judge_slides and judge_train_seeds outputs for {twin})")
-    composed = yaml.safe_load(config.read_text())
+    composed = read_yaml(config, "rerun rule judge_slides in SRC (or pass another earlier judge run)",
+                         "judge_reuse: composed config")
     if "twin" not in composed:
         raise ValueError(f"judge_reuse: {config} has no `twin` section; is it a task=slides config?")
     fit = dest / "twins" / twin / "twin_fit" / "fitted.yaml"

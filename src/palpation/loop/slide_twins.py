@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from palpation.io import read_json, save_text
+from palpation.io import save_text
+from palpation.readers import read_json
 from palpation.loop.folds import FOLDS, other
 from palpation.loop.slides import SCENE_PARAMETERS, SCHEDULE_KEYS, frame_mae, vessel_ratio
 from palpation.twin.config import TwinConfig

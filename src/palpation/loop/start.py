@@ -12,9 +12,8 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
-import yaml
-
 from palpation.loop.effects import EFFECTS, PARAMS
+from palpation.readers import read_yaml
 from palpation.twin.config import CameraConfig, MarkerConfig, MountConfig, TwinConfig
 from palpation.twin.parameters import PARAMETERS
 
@@ -72,12 +71,5 @@ def read_start(path: str | Path) -> dict:
     if not p.is_file():
         raise ValueError(f"loop start={path}: no such file; pass a twin option such as "
                          "results/loop/twin_fit/fitted.yaml or use twin.* overrides")
-    try:
-        data = yaml.safe_load(p.read_text())
-    except yaml.YAMLError as exc:
-        raise ValueError(f"loop start={path}: not valid YAML ({str(exc).splitlines()[0]}); "
-                         "pass a twin option written by the loop or the calibration") from None
-    if not isinstance(data, dict):
-        raise ValueError(f"loop start={path}: expected a mapping of twin sections (e.g. contact: {{k_s: 2000}}), "
-                         f"got {type(data).__name__}")
-    return data
+    return read_yaml(p, "pass a twin option written by the loop or the calibration, a mapping of twin sections "
+                     "(e.g. contact: {k_s: 2000})", "loop start file")

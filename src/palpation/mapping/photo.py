@@ -8,13 +8,13 @@ of `visited` by an L2 disc of radius 2 px. Photo rows/cols map to grid rows/cols
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from palpation.paths import PHANTOM
+from palpation.readers import one_line, read_image, read_json
 
 PHOTO = PHANTOM / "phantom-uncropped-compressed-undistorted.jpg"
 LABELS = PHANTOM / "phantom-labels-vgg.json"
@@ -25,18 +25,23 @@ SWEPT_RADIUS_PX = 2
 def read_polygons(path: str | Path = LABELS) -> list[np.ndarray]:
     """The annotated `vein` polygons, each (k, 2) float photo px (x right, y down)."""
     path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"VGG labels {path} not found; data/reference/phantom ships them")
-    data = json.loads(path.read_text())
+    fix = "restore data/reference/phantom/phantom-labels-vgg.json from the repository (VGG annotator format)"
+    data = read_json(path, fix, "VGG labels", kind=dict)
     polygons = []
-    for entry in data.values():
-        regions = entry["regions"]
-        for region in (regions.values() if isinstance(regions, dict) else regions):
-            shape = region["shape_attributes"]
-            if shape.get("name") == "polygon" and region.get("region_attributes", {}).get("label", "vein") == "vein":
-                polygons.append(np.stack([shape["all_points_x"], shape["all_points_y"]], 1).astype(np.float64))
+    try:
+        for entry in data.values():
+            regions = entry["regions"]
+            for region in (regions.values() if isinstance(regions, dict) else regions):
+                shape, label = region["shape_attributes"], region.get("region_attributes", {}).get("label", "vein")
+                if shape.get("name") == "polygon" and label == "vein":
+                    points = np.stack([shape["all_points_x"], shape["all_points_y"]], 1).astype(np.float64)
+                    if points.ndim != 2 or len(points) < 3 or not np.isfinite(points).all():
+                        raise ValueError(f"a polygon of {len(points)} points (or not finite)")
+                    polygons.append(points)
+    except (KeyError, TypeError, AttributeError, ValueError) as exc:
+        raise ValueError(f"VGG labels {path}: not the VGG annotator format ({one_line(exc)}); {fix}") from None
     if not polygons:
-        raise ValueError(f"{path}: no 'vein' polygons found (expected 4, VGG annotator format)")
+        raise ValueError(f"VGG labels {path}: no 'vein' polygons found (expected 4); {fix}")
     return polygons
 
 
@@ -76,9 +81,9 @@ def photo_truth(visited: np.ndarray, polygons: list[np.ndarray] | None = None,
 
 
 def photo_size(path: str | Path = PHOTO) -> tuple[int, int]:
-    """(width, height) of the rectified photo; the shipped constant if the file is absent."""
+    """(width, height) of the rectified photo; the shipped constant if the file is absent (a damaged one is refused)."""
     path = Path(path)
     if not path.exists():
         return PHOTO_SIZE
-    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-    return (image.shape[1], image.shape[0]) if image is not None else PHOTO_SIZE
+    image = read_image(path, "restore it from data/reference/phantom/ (the repository ships it)", "phantom photo")
+    return image.shape[1], image.shape[0]

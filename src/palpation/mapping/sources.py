@@ -17,6 +17,7 @@ import numpy as np
 from palpation.graph.sources import SIM_STRIDE, load_dataset, load_sim, sim_trajectory_files
 from palpation.mapping.meat_poses import MeatPoseFit, check_meat_poses, fit_meat_poses
 from palpation.mapping.silicone_poses import SweepLayout, silicone_poses
+from palpation.readers import read_npz
 from palpation.realdata.meat import TRIALS
 
 
@@ -40,16 +41,9 @@ class MapSource:
                                  f"the pose source must give one pose per recorded frame")
 
 
-def _require(path: Path, rule: str) -> Path:
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"{path} not found; run the {rule} rule first")
-    return path
-
-
 def silicone_source(path: str | Path, layout: SweepLayout = SweepLayout()) -> MapSource:
     """The 10 Silicone videos with reconstructed robot poses, all drawn into one map."""
-    seqs = load_dataset("silicone", _require(path, "silicone_set"), "test")
+    seqs = load_dataset("silicone", path, "test")
     poses = silicone_poses(layout)  # (10 videos, 16 frames, 2)
     n_frames = sorted({len(m) for m in seqs.markers})
     if len(seqs.markers) != len(poses) or n_frames != [poses.shape[1]]:
@@ -62,8 +56,8 @@ def silicone_source(path: str | Path, layout: SweepLayout = SweepLayout()) -> Ma
 
 def meat_trials(path: str | Path) -> list[dict]:
     """Per-trial arrays of the flat Meat set (palpation.realdata.meat.build_meat), with trial frames."""
-    with np.load(_require(path, "meat_set")) as z:
-        data = {k: z[k] for k in ("markers", "labels", "frame", "trial_offsets")}
+    data = read_npz(path, ("markers", "labels", "frame", "trial_offsets"), "run the meat_set rule first",
+                    "Meat set", finite=("markers",), dtypes={"trial_offsets": "iu", "frame": "iu"})
     off = data["trial_offsets"]
     if len(off) - 1 != len(TRIALS):
         raise ValueError(f"{path}: {len(off) - 1} trials in trial_offsets, expected {len(TRIALS)}")
@@ -89,16 +83,14 @@ def meat_source(path: str | Path, fit: MeatPoseFit | None = None) -> MapSource:
 
 def sim_source(manifest: str | Path, split: str = "test", stride: int = SIM_STRIDE) -> MapSource:
     """Sim trajectories of `split` with their recorded T_BA (metres), one map per slide."""
-    seqs = load_sim(_require(manifest, "simulate"), split, stride)
+    seqs = load_sim(manifest, split, stride)
     files = {f.stem: f for f in sim_trajectory_files(manifest)}
     labels, poses = [], []
     for sid in seqs.ids:
-        with np.load(files[sid]) as z:
-            if "T_BA" not in z:
-                raise ValueError(f"{files[sid]}: no T_BA; the Sim map needs recorded poses (SPEC quirk 17), "
-                                 f"re-simulate with the twin runner of docs/sim_format.md")
-            labels.append(z["labels"].astype(np.int8) if "labels" in z else None)
-            poses.append(z["T_BA"].astype(np.float64))
+        z = read_npz(files[sid], ("T_BA",), "the Sim map needs recorded poses (SPEC quirk 17): re-simulate with the "
+                     "twin runner of docs/sim_format.md", finite=("T_BA",), shapes={"T_BA": (None, 4, 4)})
+        labels.append(z["labels"].astype(np.int8) if "labels" in z else None)
+        poses.append(z["T_BA"].astype(np.float64))
     if not seqs.ids:
         raise ValueError(f"{manifest}: no trajectories in split '{split}'")
     labels = None if any(lab is None for lab in labels) else labels

@@ -22,6 +22,7 @@ import numpy as np
 
 from palpation.markers.lattice import ideal_hex_lattice, median_spacing_px
 from palpation.markers.order import match_with_dummy, warp_template
+from palpation.readers import read_image
 
 CIRCLE_CENTRE_PX = (1040.0, 584.0)
 CIRCLE_RADIUS_PX = 380.0
@@ -97,12 +98,8 @@ class BlobDetector:
 
 
 def load_gray(path: str | os.PathLike) -> np.ndarray:
-    """Read an image file as 8-bit grayscale; a missing or unreadable file raises FileNotFoundError."""
-    image = cv2.imread(os.fspath(path), cv2.IMREAD_GRAYSCALE)
-    if image is None:
-        raise FileNotFoundError(f"cannot read image {path}: missing or not an image file; restore it or "
-                                "remove it from the photo folder")
-    return image
+    """Read a photo as 8-bit grayscale (readers.read_image: FileNotFoundError if missing, ValueError if damaged)."""
+    return read_image(path, "restore it or remove it from the photo folder", "photo")
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:

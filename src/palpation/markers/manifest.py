@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from palpation.measured import TRAJECTORIES, parse_photo_name
+from palpation.readers import read_csv, read_yaml
 
 COLUMNS = ("file", "kind", "depth", "angle")
 
@@ -35,27 +36,19 @@ def state_label(kind: str, depth_mm: float, angle_deg: float | None) -> str:
 
 def _rows(path: Path) -> list[dict]:
     """Raw rows of a .csv or .yaml/.yml manifest (a list of mappings, or {photos: [...]})."""
+    fix = f"write a CSV/YAML table with columns {', '.join(COLUMNS)} (docs/measured_format.md)"
     suffix = path.suffix.lower()
-    try:
-        if suffix == ".csv":
-            import pandas as pd
-
-            frame = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True)
-            return frame.to_dict("records")
-        if suffix in {".yaml", ".yml"}:
-            import yaml
-
-            data = yaml.safe_load(path.read_text())
-            data = data.get("photos") if isinstance(data, dict) else data
-            if not isinstance(data, list) or not all(isinstance(r, dict) for r in data):
-                raise ValueError("expected a list of rows (mappings), or 'photos:' holding one")
-            return data
-    except OSError as exc:
-        raise FileNotFoundError(f"photo manifest {path}: cannot read it ({exc.strerror or exc}); "
-                                "check photos_manifest") from exc
-    except Exception as exc:  # noqa: BLE001  (parser errors of pandas/yaml: one line naming the file)
-        raise ValueError(f"photo manifest {path}: cannot parse it ({str(exc).splitlines()[0]}); "
-                         f"write a CSV/YAML table with columns {', '.join(COLUMNS)}") from exc
+    if suffix == ".csv":
+        frame = read_csv(path, fix=fix, what="photo manifest", rows=False, dtype=str, keep_default_na=False,
+                         skipinitialspace=True)
+        return frame.to_dict("records")
+    if suffix in {".yaml", ".yml"}:
+        data = read_yaml(path, fix, "photo manifest", kind=(dict, list))
+        data = data.get("photos") if isinstance(data, dict) else data
+        if not isinstance(data, list) or not all(isinstance(r, dict) for r in data):
+            raise ValueError(f"photo manifest {path}: expected a list of rows (mappings), or 'photos:' holding one; "
+                             f"{fix}")
+        return data
     raise ValueError(f"photo manifest {path}: unknown format '{suffix}'; use .csv, .yaml or .yml")
 
 
@@ -92,19 +85,23 @@ def read_manifest(path: str | os.PathLike, photos_dir: str | os.PathLike) -> lis
         file = str(row["file"] or "").strip()
         if not file or not (photos_dir / file).is_file():
             raise FileNotFoundError(f"photo manifest {path}: row {row_no} column 'file': "
-                                    f"{photos_dir / file} does not exist; paths are relative to photos_dir")
+                                    f"{str(photos_dir / file)!r} does not exist; paths are relative to photos_dir")
         kind = str(row["kind"] or "").strip()
         if kind not in TRAJECTORIES:
             raise ValueError(f"photo manifest {path}: row {row_no} column 'kind' is {kind!r}; use one of "
                              f"{', '.join(TRAJECTORIES)}")
         depth = _number(row["depth"], path, row_no, "depth", allow_empty=False)
         angle = _number(row["angle"], path, row_no, "angle", allow_empty=True)
+        if kind.startswith("twist") and angle is None:  # the twin would silently twist by SPEC's canonical angle
+            raise ValueError(f"photo manifest {path}: row {row_no} column 'angle' is empty, but a {kind} row needs "
+                             "its twist angle; write the angle in degrees")
         angle = angle if kind.startswith("twist") else None  # as for the paper's names
         name = state_label(kind, depth, angle)
         if name in names:  # two photos of one state: keep both, told apart by the file stem
             name = f"{name}_{Path(file).stem}"
         if name in names:
-            raise ValueError(f"photo manifest {path}: row {row_no} column 'file' lists {file} twice")
+            raise ValueError(f"photo manifest {path}: row {row_no} column 'file' lists {file!r} twice; "
+                             "list each photo once")
         names.add(name)
         photos.append(PhotoInfo(photos_dir / file, name, kind, depth, angle))
     return photos

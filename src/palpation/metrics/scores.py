@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from palpation.io import read_npz, save_npz
+from palpation.io import save_npz
+from palpation.readers import read_npz
 from palpation.markers.lattice import N_MARKERS
 
 

@@ -16,10 +16,13 @@ import torch
 
 from palpation.graph.normalise import NormStats
 from palpation.io import save_bytes
+from palpation.markers.lattice import N_MARKERS
 from palpation.model.config import ModelConfig
 from palpation.model.stgnn import STGNN
+from palpation.readers import one_line, read_torch
 
 FORMAT = "palpation-stgnn-1"
+_PARTS = ("state_dict", "model_config", "clip_len", "norm_stats", "rest_px")
 
 
 def save_checkpoint(path: str | os.PathLike, model: STGNN, model_cfg: ModelConfig, stats: NormStats,
@@ -48,20 +51,27 @@ def checkpoint_bytes(model: STGNN) -> int:
 
 
 def load_checkpoint(path: str | os.PathLike, device: str = "cpu") -> tuple[STGNN, NormStats, np.ndarray, dict]:
-    """-> (model in eval mode, its normalisation statistics, rest layout (127, 2), payload)."""
+    """-> (model in eval mode, its normalisation statistics, rest layout (127, 2), payload).
+
+    Read with weights_only (readers.read_torch: tensors and plain values, no code runs); a payload of another
+    format, with missing parts or with weights that do not fit its model config is refused naming the file."""
     path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"checkpoint {path} not found; train a model first (palpation.apps.train)")
-    try:
-        payload = torch.load(path, map_location=device, weights_only=False)
-    except Exception as exc:  # torch raises RuntimeError, EOFError, UnpicklingError... for a damaged file
-        raise ValueError(f"checkpoint {path} is damaged or truncated ({type(exc).__name__}); retrain it "
-                         "(rerun its train rule)") from None
+    fix = "retrain it (rerun its train rule, palpation.apps.train)"
+    payload = read_torch(path, fix, "checkpoint", device)
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
         found = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
-        raise ValueError(f"{path} is not a palpation ST-GNN checkpoint (format {found!r}); retrain it "
-                         "(rerun its train rule)")
-    model = STGNN(payload["clip_len"], ModelConfig(**payload["model_config"])).to(device)
-    model.load_state_dict(payload["state_dict"])
+        raise ValueError(f"{path} is not a palpation ST-GNN checkpoint (format {found!r}); {fix}")
+    missing = [k for k in _PARTS if k not in payload]
+    if missing:
+        raise ValueError(f"checkpoint {path} lacks {missing}; {fix}")
+    try:
+        model = STGNN(payload["clip_len"], ModelConfig(**payload["model_config"])).to(device)
+        model.load_state_dict(payload["state_dict"])
+        stats, rest = NormStats.from_dict(payload["norm_stats"]), np.asarray(payload["rest_px"], np.float64)
+    except Exception as exc:  # noqa: BLE001  TypeError (config fields), RuntimeError (weight shapes), ...
+        raise ValueError(f"checkpoint {path} does not fit its model ({one_line(exc)}); {fix}") from None
+    if rest.shape != (N_MARKERS, 2) or not np.isfinite(rest).all():
+        raise ValueError(f"checkpoint {path}: rest layout of shape {rest.shape} (or not finite), expected "
+                         f"({N_MARKERS}, 2); {fix}")
     model.eval()
-    return model, NormStats.from_dict(payload["norm_stats"]), np.asarray(payload["rest_px"]), payload
+    return model, stats, rest, payload

@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 
 from palpation.progress import bar
+from palpation.readers import open_video
 
 FRAMES_PER_STATE = 5
 STATE_FRAME_OFFSET = 2  # middle of the 5 identical frames
@@ -143,15 +144,5 @@ def read_states(path: str | os.PathLike, crops: Iterable[str | tuple[int, int, i
 
 
 def _open(path: str | os.PathLike) -> cv2.VideoCapture:
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"viewer video {path} not found; the reference videos live in "
-                                f"data/reference/videos/")
-    cap = cv2.VideoCapture(str(path))
-    if not cap.isOpened():
-        raise ValueError(f"{path}: OpenCV cannot open it as a video (corrupt or wrong format)")
-    size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
-    if size != VIDEO_SIZE:
-        cap.release()
-        raise ValueError(f"{path}: frame size {size} is not the viewer's {VIDEO_SIZE}")
-    return cap
+    return open_video(path, "the reference videos live in data/reference/videos/ (restore the file from there)",
+                      "viewer video", VIDEO_SIZE)[0]

@@ -17,6 +17,8 @@ from typing import Mapping
 import numpy as np
 import pandas as pd
 
+from palpation.readers import read_npz
+
 COLUMNS = ("dataset", "trials", "frames", "markers_per_frame", "positive_rate", "reference_positive_rate")
 # SPEC §13.4-13.5 and §7: central-frame positive rates of the reference's sets.
 REFERENCE_POSITIVE_RATE = {"silicone": 0.1133, "meat": 0.0651, "sim": 0.042}
@@ -33,21 +35,16 @@ class DatasetSpec:
 def load_sequences(path: str | os.PathLike, name: str) -> list[tuple[np.ndarray, np.ndarray]]:
     """[(markers (T, M, 2), labels (T, M)) per trial] from a set's npz, whichever layout it uses."""
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{name} set {path} not found; build it first "
-                                f"(snakemake --cores 2 {path})")
-    with np.load(path) as npz:
-        missing = [k for k in ("markers", "labels") if k not in npz.files]
-        if missing:
-            raise ValueError(f"{path}: missing arrays {missing}; a {name} set needs 'markers' and 'labels'")
-        markers, labels = npz["markers"], npz["labels"]
-        offsets = npz["trial_offsets"] if "trial_offsets" in npz.files else None
+    fix = f"build it again (snakemake --cores 2 {path})"
+    npz = read_npz(path, ("markers", "labels"), fix, f"{name} set", finite=("markers",))
+    markers, labels = npz["markers"], npz["labels"]
+    offsets = npz.get("trial_offsets")
     if markers.shape[:-1] != labels.shape or markers.shape[-1] != 2:
         raise ValueError(f"{path}: markers {markers.shape} and labels {labels.shape} do not pair up "
-                         f"as (..., M, 2) and (..., M)")
+                         f"as (..., M, 2) and (..., M); {fix}")
     if offsets is not None and markers.ndim == 3:
-        if offsets[0] != 0 or offsets[-1] != len(markers) or np.any(np.diff(offsets) <= 0):
-            raise ValueError(f"{path}: trial_offsets {offsets.tolist()} do not cut {len(markers)} frames")
+        if offsets.ndim != 1 or offsets[0] != 0 or offsets[-1] != len(markers) or np.any(np.diff(offsets) <= 0):
+            raise ValueError(f"{path}: trial_offsets {offsets.tolist()[:12]} do not cut {len(markers)} frames; {fix}")
         return [(markers[a:b], labels[a:b]) for a, b in zip(offsets[:-1], offsets[1:])]
     if markers.ndim == 4:
         return list(zip(markers, labels))

@@ -8,28 +8,18 @@ at a fixed `offset` inside its hold: 4 for the annotation video, 2 for the predi
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 import cv2
 import numpy as np
+
+from palpation.readers import open_video
 
 ANNOTATION_OFFSET = 4  # SPEC §13.4: state s -> frame 5s + 4
 PREDICTION_OFFSET = 2  # SPEC §13.5: state s -> frame 5s + 2
 
 
 def _open(path: str | os.PathLike) -> tuple[cv2.VideoCapture, int]:
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(
-            f"video {path} does not exist; the reference videos ship in data/reference/videos/ "
-            "(check the path or restore the file from the repository)")
-    cap = cv2.VideoCapture(str(path))
-    n_frames = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0
-    if n_frames <= 0:
-        cap.release()
-        raise ValueError(f"video {path} cannot be decoded by OpenCV (not an mp4 or corrupted); "
-                         "restore the original file from data/reference/videos/")
-    return cap, n_frames
+    return open_video(path, "restore the original file from data/reference/videos/ (the repository ships them)")
 
 
 def frame_count(path: str | os.PathLike) -> int:

@@ -8,7 +8,6 @@ did not produce it); the page then says so.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,6 +16,8 @@ from typing import NamedTuple
 import pandas as pd
 
 from palpation.metrics.aggregate import summarise_seeds
+from palpation.readers import read_csv
+from palpation.readers import read_json as read_json_file
 
 
 class Source(NamedTuple):
@@ -84,28 +85,13 @@ def read_table(root: str | Path, key: str) -> pd.DataFrame | None:
     path = Path(root) / src.path
     if not path.exists():
         return None
-    try:
-        df = pd.read_csv(path)
-    except (pd.errors.EmptyDataError, pd.errors.ParserError) as exc:
-        raise ValueError(f"{path}: not a readable CSV ({exc}); rerun rule {src.rule}") from exc
-    missing = [c for c in src.columns if c not in df.columns]
-    if missing:
-        raise ValueError(f"{path}: missing column(s) {missing} (the page needs {list(src.columns)}, the file has "
-                         f"{list(df.columns)}); rerun rule {src.rule} with the current code")
-    if df.empty:
-        raise ValueError(f"{path}: has a header but no rows; rerun rule {src.rule}")
-    return df
+    return read_csv(path, src.columns, f"rerun rule {src.rule} with the current code")
 
 
 def read_json(path: str | Path):
     """A JSON file's content, or None if it does not exist."""
-    path = Path(path)
-    if not path.exists():
-        return None
-    try:
-        return json.loads(path.read_text())
-    except ValueError as exc:
-        raise ValueError(f"{path}: not valid JSON ({exc})") from exc
+    return read_json_file(path, "rerun the rule that writes it (conf/results_page/folders.yaml names the rules of each "
+                          "folder)", optional=True)
 
 
 @dataclass(frozen=True)

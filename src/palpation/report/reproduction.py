@@ -10,7 +10,6 @@ committed docs/results/bench_reproduction.json is such a file).
 
 from __future__ import annotations
 
-import json
 import time
 from collections import Counter
 from pathlib import Path
@@ -18,11 +17,13 @@ from pathlib import Path
 import pandas as pd
 
 from palpation.io import save_json, save_text
+from palpation.readers import read_csv, read_json, read_text
 from palpation.tracking import git_commit
 
 STAMP = "bench/.run_start"  # under the results root
 BENCHMARKS = "benchmarks"  # under the results root
 JOB_COLUMNS = ["rule", "job", "s", "max_rss", "cpu_time", "end"]
+STAMP_FIX = "delete it; the next `snakemake` run writes it again (onstart)"
 
 
 def stamp_start(workdir: str | Path = ".") -> None:
@@ -32,7 +33,13 @@ def stamp_start(workdir: str | Path = ".") -> None:
 def run_start(results: str | Path) -> float | None:
     """The start of the latest run (`onstart`'s stamp) under a results root, or None."""
     stamp = Path(results) / STAMP
-    return float(stamp.read_text()) if stamp.exists() else None
+    if not stamp.exists():
+        return None
+    text = read_text(stamp, STAMP_FIX, "run-start stamp").strip()
+    try:
+        return float(text)
+    except ValueError:
+        raise ValueError(f"run-start stamp {stamp} holds {text[:40]!r}, not a time in seconds; {STAMP_FIX}") from None
 
 
 def benchmark_jobs(results: str | Path) -> pd.DataFrame:
@@ -43,10 +50,8 @@ def benchmark_jobs(results: str | Path) -> pd.DataFrame:
     rows = []
     for path in sorted(root.rglob("*.tsv")):
         rel = path.relative_to(root)
-        try:
-            table = pd.read_csv(path, sep="\t", na_values=["-"])
-        except (OSError, ValueError) as e:
-            raise ValueError(f"{path}: not a Snakemake benchmark file ({e}); delete it and rerun its rule") from None
+        table = read_csv(path, fix="delete it and rerun its rule", what="Snakemake benchmark file", rows=False,
+                         sep="\t", na_values=["-"])
         if "s" not in table.columns or table.empty:
             raise ValueError(f"{path}: no `s` column or no row; Snakemake's benchmark files have both; "
                              "delete it and rerun its rule")
@@ -97,7 +102,9 @@ def record_run(profile: str, device: str, workdir: str | Path = ".") -> dict:
     record = {"profile": profile, "device": device, "wall_s": round(time.time() - since, 1),
               "per_rule": {k: round(float(v), 1) for k, v in sorted(times.items())}, "commit": git_commit()}
     out = results / "bench" / "reproduction.json"
-    records = json.loads(out.read_text()) if out.exists() else []
+    records = read_json(out, "delete it (the next run writes a new one)", kind=list, optional=True) or []
+    if any(not isinstance(r, dict) or not {"profile", "device"} <= r.keys() for r in records):
+        raise ValueError(f"{out}: every record needs `profile` and `device`; delete it (the next run writes a new one)")
     records = [r for r in records if (r["profile"], r["device"]) != (profile, device)] + [record]
     save_json(out, records)
     return record

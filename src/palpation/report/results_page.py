@@ -18,10 +18,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import jinja2
-import pandas as pd
-import yaml
 
 from palpation.io import save_text
+from palpation.readers import read_csv, read_text, read_yaml
 from palpation.report import page_training as training
 from palpation.report import page_twin as twin
 from palpation.report.compare import SOURCES, TITLES, Section, read_json, read_table
@@ -83,9 +82,8 @@ class Explanation:
 def load_explanations(path: str | Path) -> dict[str, list[Explanation]]:
     """{table key: [Explanation]}; unknown keys or conditions raise, naming the file (typos would hide text)."""
     path = Path(path)
-    data = yaml.safe_load(path.read_text()) or {}
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a mapping of table keys to lists of {{text, when}} entries")
+    data = read_yaml(path, "write a mapping of table keys to lists of {text, when} entries", "explanations file",
+                     default={})
     out = {}
     for key, items in data.items():
         if key not in TITLES and key != "run":
@@ -154,7 +152,7 @@ def sim_set_twin(root: Path) -> str | None:
     if choice:
         return f"the `{choice['sim_set_twin']}` twin ({choice['how']}; `judge/choice/choice.json`)"
     log = root / "logs" / "sim" / "simulate_dataset.log"
-    first = log.read_text().split("\n", 1)[0] if log.exists() else ""
+    first = read_text(log, "rerun rule simulate_dataset", empty_ok=True).split("\n", 1)[0] if log.exists() else ""
     if first.startswith(SIM_TWIN_LINE):
         return f"{first[len(SIM_TWIN_LINE):]} (`logs/sim/simulate_dataset.log`)"
     return None
@@ -167,7 +165,8 @@ def sections(root: Path, k: float = 2.0, link=None) -> dict[str, Section | None]
     build = {
         "data": lambda: twin.data_sets(t["data"], t["seed_sweep"], t["table4_markers"], sim_set_twin(root)),
         "calibration": lambda: twin.calibration(t["calibration"]),
-        "loop": lambda: twin.loop(t["loop"], pd.read_csv(loop_states) if loop_states.exists() else None),
+        "loop": lambda: twin.loop(t["loop"], read_csv(loop_states, fix="rerun rule loop", rows=False)
+                                  if loop_states.exists() else None),
         "seed_sweep": lambda: training.seed_sweep_section(t["seed_sweep"], k),
         "table3": lambda: training.table3_section(t["table3"], k),
         "table4_markers": lambda: training.table4_markers_section(t["table4_markers"], t["seed_sweep"], k),
@@ -211,10 +210,11 @@ def differences(secs: dict[str, Section | None], explanations: dict[str, list[Ex
 
 def folders(root: Path, path: str | Path, link) -> str:
     """The table of result folders (conf/results_page/folders.yaml), marking those this run made."""
-    entries = yaml.safe_load(Path(path).read_text()) or []
+    entries = read_yaml(path, "write a list of {path, rules, what} entries", "results-page folders file", kind=list,
+                        default=[])
     rows = []
     for e in entries:
-        missing = [k for k in ("path", "rules", "what") if k not in e]
+        missing = [k for k in ("path", "rules", "what") if not isinstance(e, dict) or k not in e]
         if missing:
             raise ValueError(f"{path}: entry {e} lacks {missing}")
         there = "yes" if (root / e["path"]).exists() else "–"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from palpation.io import read_json
+from palpation.readers import read_json
 
 SWEEP_COLUMNS = ("config", "seed", "auroc", "ap", "fg_iou", "bg_iou", "mcc", "f1", "precision", "recall", "chance")
 

@@ -14,9 +14,11 @@ from pathlib import Path
 import numpy as np
 
 from palpation.io import save_npz
+from palpation.readers import read_npz
 
 # gmsh Mesh.CharacteristicLengthFactor per named resolution; 0.3 reproduces the reference mesh.
 RESOLUTIONS = {"reference": 0.3, "coarse": 0.7}
+_MESH_KEYS = ("nodes", "tets", "surface_nodes", "contact_tris", "dome_nodes", "fixed", "resolution")
 
 # SPEC §2.1 geometry, mm
 DOME_ROC_MM = 38.6
@@ -51,14 +53,25 @@ class SensorMesh:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "SensorMesh":
+        """The mesh file written by `save` (rule `mesh`), every array checked: a damaged or foreign file would
+        otherwise fail inside the FEM setup (an index error) or simulate a wrong solid."""
         path = Path(path)
-        if not path.exists():
-            raise FileNotFoundError(f"mesh file {path} does not exist: build it with "
-                                    f"`snakemake results/twin/mesh_<resolution>.npz`")
-        with np.load(path) as z:
-            return cls(nodes=z["nodes"], tets=z["tets"], surface_nodes=z["surface_nodes"],
-                       contact_tris=z["contact_tris"], dome_nodes=z["dome_nodes"], fixed=z["fixed"],
-                       resolution=str(z["resolution"]))
+        fix = "rebuild it with `snakemake results/twin/mesh_<resolution>.npz` (or point `mesh` at such a file)"
+        z = read_npz(path, _MESH_KEYS, fix, what="mesh file", finite=("nodes",),
+                     shapes={"nodes": (None, 3), "tets": (None, 4), "surface_nodes": (None,),
+                             "contact_tris": (None, 3), "dome_nodes": (None,), "fixed": (None,), "resolution": ()},
+                     dtypes={"tets": "iu", "surface_nodes": "iu", "contact_tris": "iu", "dome_nodes": "iu",
+                             "fixed": "b", "resolution": "U"})
+        n = len(z["nodes"])
+        for key in ("tets", "surface_nodes", "contact_tris", "dome_nodes"):
+            if z[key].size and (z[key].min() < 0 or z[key].max() >= n):
+                raise ValueError(f"mesh file {path}: `{key}` indexes nodes outside 0..{n - 1}; {fix}")
+        if not len(z["tets"]) or len(z["fixed"]) != n:
+            raise ValueError(f"mesh file {path}: {len(z['tets'])} tets and {len(z['fixed'])} `fixed` flags for "
+                             f"{n} nodes; {fix}")
+        return cls(nodes=z["nodes"], tets=z["tets"], surface_nodes=z["surface_nodes"],
+                   contact_tris=z["contact_tris"], dome_nodes=z["dome_nodes"], fixed=z["fixed"],
+                   resolution=str(z["resolution"]))
 
     def stats(self) -> dict:
         """Counts, tet-edge lengths (mm) and volume (mm^3) as tabulated in SPEC §2.2.

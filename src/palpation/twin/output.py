@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from palpation.io import atomic_path, hard_link, read_npz, save_json, save_npz
+from palpation.io import atomic_path, hard_link, save_json, save_npz
+from palpation.readers import read_json, read_npz
 
 FORMAT = "palpation-sim/1"
 KEYS = ("markers", "labels", "centreline_px", "contact", "T_BA", "frame_index", "centreline_A",
@@ -76,10 +77,56 @@ def save_trajectory(path: str | os.PathLike, rec: TrajectoryRecord) -> Path:
 
 def load_trajectory(path: str | os.PathLike) -> dict:
     """Read a trajectory file back into a dict of arrays; `params` is decoded from JSON."""
-    out = read_npz(path, KEYS, f"not a complete {FORMAT} trajectory file: rerun the simulate stage")
-    out["params"] = json.loads(str(out["params"]))
+    fix = f"not a complete {FORMAT} trajectory file: rerun the simulate stage"
+    out = read_npz(path, KEYS, fix, finite=("markers", "centreline_px", "T_BA"),
+                   shapes={"markers": (None, 127, 2), "labels": (None, 127), "params": (), "kind": (), "seed": ()},
+                   dtypes={"params": "U", "kind": "U", "format": "U", "seed": "iu"})
+    try:
+        out["params"] = json.loads(str(out["params"]))
+    except ValueError as exc:
+        raise ValueError(f"{path}: `params` is not valid JSON ({exc}); {fix}") from None
     out["kind"], out["format"], out["seed"] = str(out["kind"]), str(out["format"]), int(out["seed"])
     return out
+
+
+SIM_FIX = "rerun the simulate_dataset rule (palpation.apps.simulate) to rewrite the set"
+
+
+def read_sim_manifest(path: str | os.PathLike, fix: str = SIM_FIX,
+                      allow_empty: bool = False) -> tuple[dict, list[Path]]:
+    """(the manifest's mapping, the trajectory files its rows name, in order), every row checked.
+
+    Rows live under `files` (write_outputs: {file, kind, seed, params, ...}) or `trajectories` (plain names,
+    graph.synthetic); a bare list of rows is read too. A row without a file name, of an unknown kind or with
+    non-mapping params, and a listed file that is gone, are refused naming the row; so is a manifest listing
+    no file at all (every trajectory of the run diverged) unless `allow_empty`."""
+    from palpation.twin.trajectory import KINDS
+
+    path = Path(path)
+    meta = read_json(path, fix, "Sim manifest", kind=(dict, list))
+    meta = {"files": meta} if isinstance(meta, list) else meta
+    key = "trajectories" if "trajectories" in meta else "files"
+    rows = meta.get(key)
+    if not isinstance(rows, list) or (not rows and not allow_empty):
+        failed = meta.get("failed") if isinstance(meta.get("failed"), list) else []
+        raise ValueError(f"Sim manifest {path} lists no trajectory files ({len(failed)} failed); {fix} (check its "
+                         "log for diverged environments)")
+    files = []
+    for i, row in enumerate(rows, start=1):
+        name = row if isinstance(row, str) else row.get("file", row.get("path")) if isinstance(row, dict) else None
+        if not isinstance(name, str) or not name.strip():
+            raise ValueError(f"Sim manifest {path}: {key} row {i} ({str(row)[:60]!r}) names no trajectory file; {fix}")
+        if isinstance(row, dict) and "kind" in row and row["kind"] not in KINDS:
+            raise ValueError(f"Sim manifest {path}: {key} row {i} ({name!r}) has kind {row['kind']!r}, not one of "
+                             f"{', '.join(KINDS)}; {fix}")
+        if isinstance(row, dict) and not isinstance(row.get("params", {}), dict):
+            raise ValueError(f"Sim manifest {path}: {key} row {i} ({name!r}) has params {str(row['params'])[:40]!r}, "
+                             f"not a mapping; {fix}")
+        files.append(path.parent / name)
+    missing = [str(f) for f in files if not f.is_file()]
+    if missing:
+        raise FileNotFoundError(f"Sim manifest {path}: trajectory files missing: {missing[:3]}; {fix}")
+    return meta, files
 
 
 def previous_files(out_dir: Path, manifest: Path) -> list[Path]:
@@ -128,14 +175,13 @@ def copy_outputs(src_manifest: str | os.PathLike, out_dir: str | os.PathLike, me
     A file is hard-linked where the file system allows it (io.hard_link): sets are only ever rewritten by renaming
     new files into place, so a later run of either set leaves the other's files as they were."""
     src_manifest = Path(src_manifest)
-    data = json.loads(src_manifest.read_text())
+    data, files = read_sim_manifest(src_manifest)
     out_dir = Path(out_dir)
-    path = _clear(out_dir, manifest_name, {Path(e["file"]).name for e in data["files"]})
-    for entry in data["files"]:
-        name = Path(entry["file"]).name
-        with atomic_path(out_dir / name) as tmp:
-            if not hard_link(src_manifest.parent / name, tmp):
-                shutil.copyfile(src_manifest.parent / name, tmp)
+    path = _clear(out_dir, manifest_name, {f.name for f in files})
+    for src in files:
+        with atomic_path(out_dir / src.name) as tmp:
+            if not hard_link(src, tmp):
+                shutil.copyfile(src, tmp)
     save_json(path, {**data, **meta})
     return path
 

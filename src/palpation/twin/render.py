@@ -10,7 +10,6 @@ Run it through the Hydra app `python -m palpation.apps.render_twin` (rule render
 
 from __future__ import annotations
 
-import json
 import logging
 from pathlib import Path
 
@@ -18,7 +17,7 @@ import cv2
 
 from palpation.figures.twin_render import draw_frame, markers_figure
 from palpation.io import atomic_path
-from palpation.twin.output import load_trajectory
+from palpation.twin.output import load_trajectory, read_sim_manifest
 
 log = logging.getLogger(__name__)
 FPS = 30
@@ -39,12 +38,7 @@ def write_video(traj: dict, path: Path, name: str) -> Path:
 
 
 def trajectory_files(manifests: list[Path]) -> list[Path]:
-    files = []
-    for m in manifests:
-        if not m.exists():
-            raise FileNotFoundError(f"manifest {m} does not exist; run the simulate stage first")
-        files += [m.parent / e["file"] for e in json.loads(m.read_text())["files"]]
-    return files
+    return [f for m in manifests for f in read_sim_manifest(m, "run the simulate stage first", allow_empty=True)[1]]
 
 
 def render(manifests: list[Path], out_dir: Path) -> list[Path]:
