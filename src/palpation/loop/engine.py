@@ -66,6 +66,7 @@ class Problem:
     reference_attribution: dict | None = None  # real mode: attribution at the starting twin (loop.real)
     starts: list[dict] = field(default_factory=list)  # the last kept try's best distinct trials (final refit)
     noise_px: float | None = None  # detector noise per coordinate (loop.compete: a residual at the noise level)
+    parsimony: dict | None = None  # loop.parsimony.prune: the tests of the added effects after the final refit
 
     def fit_targets(self) -> list[Target]:
         return [t for t in self.targets if t.fit]

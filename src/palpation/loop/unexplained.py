@@ -173,6 +173,7 @@ def check_all(problems: list, simulate, cfg, sigmas: Mapping[str, float]) -> Non
     """The final check of every problem, in one signature batch for those whose twin moved since their
     last round's signatures (a round that kept an effect); the result lands in problem.final."""
     from palpation.loop.engine import evaluate, refit_dofs, signatures
+    from palpation.loop.parsimony import prune
     from palpation.loop.refit import converge
 
     evaluate([p for p in problems if p.markers is None], simulate)
@@ -181,6 +182,9 @@ def check_all(problems: list, simulate, cfg, sigmas: Mapping[str, float]) -> Non
         polished = converge(problems, simulate, cfg.search.bounds, cfg.final_refit_iters, cfg.gate_z,
                             cfg.camera_grid_converged, dict(cfg.steps), cfg.final_refit_regrid, cfg.unexplained_ratio,
                             cfg.final_refit_off_starts)
+    if cfg.prune:  # the named set: only the added effects the final twin needs (loop.parsimony)
+        prune(problems, simulate, {p.name: {**cfg.search.bounds, **p.trust} for p in problems}, cfg.final_refit_iters,
+              cfg.gate_z)
     stale = [p for p in problems if p.last_signatures is None or p.last_signatures["params"] != p.params]
     for p in stale:
         p.refit = refit_dofs(p)
