@@ -95,12 +95,16 @@ def start_effects(p: Problem) -> list[str]:
 
 def verdict_lines(p: Problem, meta: Mapping) -> list[str]:
     """The report's first lines (issue 13.6): what was found and how surely, bounds, what remains, target."""
-    kept = [r for r in p.rounds if r["round"] > 0 and r["accepted"]]
+    kept = [r for r in p.rounds if r["round"] > 0 and r["accepted"] and set(r.get("effects", [])) <= set(p.effects)]
     found = "; ".join(f"**{r['effect']}** (round {r['round']}: {r['after']['gate']['why']})" for r in kept)
     start = start_effects(p)
     L = ["## Verdict", "",
          f"* Effects found: {found or '**none**'}" + (f"; the starting twin already had {', '.join(start)}"
                                                      if start else "") + "."]
+    dropped = (p.parsimony or {}).get("dropped", [])
+    if dropped:  # loop.parsimony: kept by a round, not needed by the final twin
+        L.append(f"* Taken out after the final refit, not significantly needed by the final twin (loop.parsimony): "
+                 f"{', '.join(dropped)}; not in the fitted twin.")
     edge = at_bounds(p.params, p.searched, meta.get("bounds"))
     if edge:
         L.append("* At a search bound: " + ", ".join(f"{n} = {p.params[n]:.4g}" for n in edge)

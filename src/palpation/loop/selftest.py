@@ -29,6 +29,7 @@ from palpation.loop.config import LoopConfig
 from palpation.loop.effects import EFFECTS, PARAMS, move
 from palpation.loop.engine import Problem, evaluate, initial_params, run_rounds
 from palpation.loop.inputs import Target
+from palpation.loop.parsimony import added_effects
 from palpation.loop.real import make_problem
 from palpation.loop.unexplained import check_all, noise_estimate
 from palpation.loop.unlisted import UNLISTED, UNLISTED_PREFIX
@@ -254,7 +255,7 @@ def loop_on_sets(cfg: LoopConfig, injections: list[Injection], paths: list[Path]
     check_all(problems, simulate, cfg, sigmas)
     rows = []
     for inj, p, b in zip(injections, problems, before):
-        added = [e for r in p.rounds if r["accepted"] for e in r.get("effects", [])]
+        added = added_effects(p)  # the rounds' effects that the final twin still needs (loop.parsimony)
         unexplained = bool(p.final["test"]["unexplained"])
         named = [*added, *(["unexplained"] if unexplained else [])]
         rows.append({"run": inj.run, "effects_injected": inj.label,
@@ -262,6 +263,8 @@ def loop_on_sets(cfg: LoopConfig, injections: list[Injection], paths: list[Path]
                      "effects_named": "+".join(named) or "none", "mae_before_px": b["all"],
                      "mae_after_px": p.summary()["all"], "excess_ratio": p.final["test"]["excess_ratio"],
                      "injected_effects": inj.effects, "unlisted": inj.unlisted, "named": added,
+                     "named_by_rounds": [e for r in p.rounds if r["accepted"] for e in r.get("effects", [])],
+                     "parsimony": p.parsimony,
                      "unexplained": unexplained, "strengths": inj.strengths, "betas": inj.betas, "redrawn": inj.redrawn,
                      "tries": [{"round": r["round"], "effects": r.get("effects", []), "accepted": r["accepted"],
                                 "passed": r.get("passed", r["accepted"]),
