@@ -148,6 +148,8 @@ def record(inj: Injection, seed: int, row: dict, fitted: Mapping[str, float], fp
            "params_true": _params_json(inj.params, keys), "params_fitted": _params_json(fitted, keys)}
     detail = {k: row[k] for k in ("injected_effects", "unlisted", "named", "unexplained", "strengths", "betas",
                                   "redrawn", "tries")}
+    # what the rounds kept before loop.parsimony took out what the final twin does not need (both verdicts kept)
+    detail.update({k: row[k] for k in ("named_by_rounds", "parsimony") if k in row})
     return {"fingerprint": fp, **out, **detail, "n_effects": len(inj.effects)}
 
 
