@@ -73,3 +73,17 @@ def test_measure_takes_twice_the_largest_difference_up_to_a_1_2_5_step(tmp_path,
     assert cols["ap"] == {"measured": 0.0, "tolerance": 0.0}
     assert [contract.step_up(x) for x in (0.0, 0.001, 0.0011, 0.003, 0.0051, 7.0)] == [0.0, 0.001, 0.002, 0.005,
                                                                                         0.01, 10.0]
+
+
+def test_the_committed_reference_and_tolerances_agree_with_the_results_page(tmp_path):
+    """docs/results/reproduce/quick holds results-page tables only, each with measured tolerances, and is within
+    the contract against itself laid out as a results root."""
+    reference = contract.TOLERANCES.parent / "reproduce" / "quick"
+    names = {p.name for p in reference.glob("*.csv")}
+    assert names and names == {name for name, _, _ in contract.contract_tables(reference, reference)}
+    tolerances = contract.load_tolerances(contract.TOLERANCES)
+    assert set(tolerances) == names
+    for _, path, ref in contract.contract_tables(tmp_path, reference):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(ref.read_bytes())
+    assert contract.check(tmp_path, reference, tolerances) == []

@@ -1,6 +1,6 @@
 """The reproducibility contract: is a run's table the committed one, within what another machine may change?
 
-    python -m palpation.report.contract check results --against docs/results/quick
+    python -m palpation.report.contract check results --against docs/results/reproduce/quick
     python -m palpation.report.contract measure RUN_A RUN_B --out docs/results/contract.json
 
 Three tiers (docs/DEVELOPING.md, "Reproducibility contract"):
@@ -85,7 +85,7 @@ def check(run: Path, reference: Path, tolerances: dict) -> list[str]:
     if not tables:
         names = ", ".join(sorted(Path(s.path).name for s in SOURCES.values()))
         raise ValueError(f"{reference}: holds none of the results page's tables ({names}); pass the folder of "
-                         "committed tables, e.g. --against docs/results/quick")
+                         "committed tables, e.g. --against docs/results/reproduce/quick")
     lines = []
     for name, got_path, want_path in tables:
         if not got_path.is_file():
@@ -148,12 +148,12 @@ def main(argv=None) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     chk = sub.add_parser("check", help="compare a run's tables with the committed ones under the contract")
     chk.add_argument("results", type=Path, help="the run's results root (e.g. results)")
-    chk.add_argument("--against", type=Path, default=Path("docs/results/quick"), help="committed tables")
+    chk.add_argument("--against", type=Path, default=Path("docs/results/reproduce/quick"), help="committed tables")
     chk.add_argument("--tolerances", type=Path, default=TOLERANCES, help="measured tolerances (contract.json)")
     mea = sub.add_parser("measure", help="measure the tolerances from two runs of one commit")
     mea.add_argument("run_a", type=Path)
     mea.add_argument("run_b", type=Path, help="the same run made as another CPU would (docs/DEVELOPING.md)")
-    mea.add_argument("--against", type=Path, default=Path("docs/results/quick"), help="which tables (by name)")
+    mea.add_argument("--against", type=Path, default=Path("docs/results/reproduce/quick"), help="which tables (by name)")
     mea.add_argument("--how", required=True, help="how run_b differs from run_a (kept in the record)")
     mea.add_argument("--out", type=Path, default=TOLERANCES)
     args = parser.parse_args(argv)
