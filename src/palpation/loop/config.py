@@ -139,9 +139,12 @@ class LoopConfig:
     # + mount for contact + mount, `unexplained` at 2.3x; on the CPU LM from its camera-off point reaches the truth,
     # 1.05x). Adopted with final_refit_regrid (above)
     final_refit_off_starts: bool = True
-    # after the final refit each added effect is taken out (switched off, then the rest re-fitted): one the twin
-    # does not significantly need (gate_z) leaves the named set and the twin file (loop.parsimony)
-    prune: bool = True
+    # after the final refit each added effect is taken out (switched off; if that is significantly worse, the rest
+    # re-fitted): one the twin does not significantly need (gate_z) leaves the named set and the twin file
+    # (loop.parsimony). Off: on the 12 runs of generative dev seed 0 (CPU, quick sizes) it took out one spurious
+    # mount (in a run still missing an effect) and one true weak layered shell: exact sets 8 -> 7 of 10; a variant
+    # asking the rounds' gate instead took out true weak mounts: 8 -> 6 (docs/loop.md, "5c")
+    prune: bool = False
     # every try (the null try too) is finished by a bounded Levenberg-Marquardt solver after its search
     # (loop.polish): polish_iters iterations from its polish_starts best distinct trials (0 = off), so tries
     # are compared at convergence; the final refit starts from the final twin and final_refit_starts - 1
