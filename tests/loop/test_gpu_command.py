@@ -21,7 +21,8 @@ def test_the_scripts_overrides_compose_and_validate():
               "loop.search.ask_workers": "16", "loop.final_refit_starts": "3",
               "loop.compete": "true", "loop.final_refit_iters": "10", "loop.nested_starts": "true",
               "loop.null_converge": "true", "loop.camera_grid_converged": "true", "loop.projected_null": "true",
-              "loop.final_refit_regrid": "2", "loop.final_refit_off_starts": "true"}
+              "loop.final_refit_regrid": "2", "loop.final_refit_off_starts": "true",
+              "loop.generative.split": "dev", "loop.generative.runs": "60"}  # MODE=generative's sizes
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="loop", overrides=["mode=selftest", *(f"{k}={values[k]}" for k in keys)])
     loop = OmegaConf.to_object(cfg.loop).validate()

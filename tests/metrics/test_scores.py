@@ -23,7 +23,7 @@ def test_load_scores_errors(tmp_path):
     with pytest.raises(ValueError, match="empty prediction set"):
         load_scores(tmp_path / "empty.npz")
     np.savez(tmp_path / "bad.npz", probs=np.zeros(3))
-    with pytest.raises(ValueError, match=r"bad.npz lacks the arrays \['labels'\]"):
+    with pytest.raises(ValueError, match=r"bad.npz lacks the key\(s\) \['labels'\]; rerun the train rule"):
         load_scores(tmp_path / "bad.npz")
     np.savez(tmp_path / "old.npz", probs=np.zeros(127), labels=np.zeros(127))  # before the ids
     with pytest.raises(ValueError, match=r"old.npz: no \(sequence, frame\) ids .*rerun the train rule") as e:

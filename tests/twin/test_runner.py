@@ -130,7 +130,7 @@ def test_a_set_with_the_same_request_is_copied_not_simulated(tmp_path, mesh):
     assert os.path.samefile(tmp_path / "a" / "trajectory_0000.npz", tmp_path / "b" / "trajectory_0000.npz")
     run(compose_simulate(mesh_path, tmp_path / "a", extra=("seed=7",)))
     assert (tmp_path / "b" / "trajectory_0000.npz").read_bytes() == before != (tmp_path / "a" / "trajectory_0000.npz").read_bytes()
-    with pytest.raises(FileNotFoundError, match="config reuse: .*nope.json is not a readable Sim-set manifest"):
+    with pytest.raises(FileNotFoundError, match="Sim manifest .*nope.json not found; name manifest.json files of finished sets in `reuse`"):
         run(compose_simulate(mesh_path, tmp_path / "d", extra=(f"reuse=[{tmp_path / 'nope.json'}]",)))
 
 
