@@ -2,7 +2,6 @@
 
 import importlib.util
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import nullcontext
 
 import numpy as np
 import pytest
@@ -12,9 +11,10 @@ from palpation.twin import resident
 from palpation.twin.agreement import LAYERED, compare_devices
 from palpation.twin.config import TwinConfig
 from palpation.twin.mesh import shell_weights
-from palpation.twin.resident import CPU_TILES_LOCK, ResidentLayout, color_tets
+from palpation.twin.resident import ResidentLayout, color_tets
 from palpation.twin.resident_sync import chunk_table, pack_corners
 from palpation.twin.simulator import BatchedTwin
+from palpation.twin.thread_stress import press_frames
 
 
 DEVICES = ["cpu"] + (["cuda:0"] if wp.is_cuda_available() else [])
@@ -38,19 +38,7 @@ def _press(mesh, kernel, frames=6, layout=None, block_dim=1, device="cpu", varia
                       device=device)
     if layout is not None:
         sim.resident = layout(sim)
-    top = cfg.scene.phantom_top_z
-    T = np.tile(np.eye(4), (2, 1, 1))
-    T[:, :3, :3] = np.diag([1.0, -1.0, -1.0])  # dome down
-    T[:, :3, 3] = [cfg.scene.vessel_center_x, cfg.scene.vessel_center_y, top + 0.0005]
-    sim.reset(T)
-    out = []
-    for k in range(frames):
-        T = T.copy()
-        T[:, 2, 3] -= 0.0005
-        with CPU_TILES_LOCK if k in held else nullcontext():
-            sim.step_frame(T)
-        out.append(sim.positions_world().copy())
-    return np.array(out), sim
+    return press_frames(sim, frames, held), sim
 
 
 @pytest.mark.parametrize("cap,coloring", [(None, "mesh_order"), (64, "mesh_order"), (64, "largest_first")])

@@ -19,6 +19,7 @@ import threading
 import time
 import traceback
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import nullcontext
 
 import numpy as np
 import warp as wp
@@ -26,6 +27,7 @@ from warp._src import context as warp_context
 
 from palpation.twin.config import TwinConfig
 from palpation.twin.mesh import cached_sensor_mesh
+from palpation.twin.resident import CPU_TILES_LOCK
 from palpation.twin.simulator import BatchedTwin
 
 
@@ -78,17 +80,23 @@ def press(mesh, kernel: str, frames: int = 4) -> np.ndarray:
     """Two envs pressing 0.5 mm a frame into the vessel (one without it): positions after each frame."""
     cfg = TwinConfig()
     cfg.integrator.kernel = kernel
-    sim = BatchedTwin(mesh, 2, cfg, {"vessel": np.array([1.0, 0.0])}, device="cpu")
-    top = cfg.scene.phantom_top_z
+    return press_frames(BatchedTwin(mesh, 2, cfg, {"vessel": np.array([1.0, 0.0])}, device="cpu"), frames)
+
+
+def press_frames(sim: BatchedTwin, frames: int, held=()) -> np.ndarray:
+    """A two-env twin from 0.5 mm above the phantom over the vessel, down 0.5 mm a frame: positions after each frame.
+    `held`: frames stepped while this thread holds resident.CPU_TILES_LOCK (as another thread's twin would)."""
+    scene = sim.cfg.scene
     T = np.tile(np.eye(4), (2, 1, 1))
     T[:, :3, :3] = np.diag([1.0, -1.0, -1.0])  # dome down
-    T[:, :3, 3] = [cfg.scene.vessel_center_x, cfg.scene.vessel_center_y, top + 0.0005]
+    T[:, :3, 3] = [scene.vessel_center_x, scene.vessel_center_y, scene.phantom_top_z + 0.0005]
     sim.reset(T)
     out = []
-    for _ in range(frames):
+    for k in range(frames):
         T = T.copy()
         T[:, 2, 3] -= 0.0005
-        sim.step_frame(T)
+        with CPU_TILES_LOCK if k in held else nullcontext():
+            sim.step_frame(T)
         out.append(sim.positions_world().copy())
     return np.array(out)
 
