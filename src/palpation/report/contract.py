@@ -50,7 +50,8 @@ def _numeric(frame: pd.DataFrame) -> list[str]:
 def _keys(frame: pd.DataFrame) -> list[str]:
     """Columns that name a row: text and booleans, plus integer seeds, folds, rounds and clip lengths."""
     named = {"seed", "round", "clip_len", "fold", "seeds", "n_seeds", "trials"}
-    return [c for c in frame.columns if c not in _numeric(frame) or c in named]
+    numeric = set(_numeric(frame))
+    return [c for c in frame.columns if c not in numeric or c in named]
 
 
 def _row_name(frame: pd.DataFrame, i: int) -> str:
@@ -67,13 +68,13 @@ def differences(name: str, got: pd.DataFrame, want: pd.DataFrame) -> tuple[list[
     if list(got.columns) != list(want.columns) or len(got) != len(want):
         return [f"{name}: columns or rows differ ({len(got)} rows {list(got.columns)} vs {len(want)} rows "
                 f"{list(want.columns)})"], {}
-    problems = []
-    for key in _keys(want):
+    problems, keys = [], _keys(want)
+    for key in keys:
         a, b = got[key].astype(str).to_numpy(), want[key].astype(str).to_numpy()
         for i in np.flatnonzero(a != b)[:3]:
             problems.append(f"{name} {_row_name(want, i)}: {key} is {a[i]!r}, committed {b[i]!r}")
     worst = {}
-    for col in [c for c in _numeric(want) if c not in _keys(want)]:
+    for col in [c for c in _numeric(want) if c not in keys]:
         gaps = _gaps(got[col].to_numpy(float), want[col].to_numpy(float))
         worst[col] = float(gaps.max()) if len(gaps) else 0.0
     return problems, worst

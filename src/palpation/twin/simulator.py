@@ -300,8 +300,7 @@ class BatchedTwin:
                 self.substep()
         wp.launch(snap_fixed_nodes, dim=n * N, device=dev, inputs=[self.x_u, self.fixed, N], outputs=[self.x])
 
-    @warp_exclusive
-    def substep(self) -> None:
+    def substep(self) -> None:  # no lock of its own: simulate, its one caller, holds it
         n, N, dev, d = self.n_envs, self.n_nodes, self.device, self.cfg.damping
         T = self.n_force_tets  # the tets that move come first in self.tets (see __init__)
         if self.centroid_rule:  # else the node pass below leaves f zeroed

@@ -3,9 +3,9 @@
 One run is the body of tests/twin/test_resident.py::test_cpu_resident_twins_in_threads: a twin pressing into
 the phantom alone (the reference bits), then `--twins` such twins spread over `--threads` threads, each built,
 captured, stepped and read while the others do the same. A run fails when a thread raises, a twin's positions
-differ from the reference by one bit, or a thread's Warp call falls inside another thread's capture (CaptureWitness). Warp's CPU graph capture is process-wide (warp_runtime.CAPTURE_LOCK says
-why that matters), so a Warp call of one thread that lands inside another thread's capture either crashes or
-is recorded into the other twin's graph; this script makes such overlaps frequent. Too slow for CI (a run takes
+differ from the reference by one bit, or a thread's Warp call falls inside another thread's capture
+(CaptureWitness). Warp's CPU graph capture is process-wide (warp_runtime.CAPTURE_LOCK says why that matters), so
+such a call either crashes or is recorded into the other twin's graph; this script makes such overlaps frequent. Too slow for CI (a run takes
 1-3 s on two cores): tests/twin/test_thread_safety.py runs a short version.
 """
 
