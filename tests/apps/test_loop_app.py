@@ -39,7 +39,7 @@ def config(inputs, out, *extra):
         return compose(config_name="loop", overrides=[
             f"mesh={inputs / 'mesh.npz'}", f"measured={inputs / 'good'}", "track=false", f"out.dir={out}",
             "loop.max_frames=10", "loop.search.n_trials=2", "loop.search.n_startup=1", "loop.max_rounds=1",
-            "loop.tries_per_round=1", "loop.effects=[surface_contact,camera]", "loop.holdout=[twist_x]",
+            "loop.method.tries_per_round=1", "loop.effects=[surface_contact,camera]", "loop.holdout=[twist_x]",
             "loop.selftest.cases=[camera]", "loop.selftest.runs_per_case=1", "loop.selftest.max_rounds=1",
             "loop.selftest.states=[press,twist_x]", "loop.selftest.holdout=[twist_x]", *extra])
 
@@ -128,7 +128,7 @@ def test_starting_twin_is_honoured_or_refused(inputs, tmp_path):
     """Issue 13.5: `twin.contact.phantom_contact=true twin.contact.k_s=2000` is the loop's start, not dropped."""
     out = tmp_path / "start"
     res = app.run(config(inputs, out, "loop.max_rounds=0", "twin.contact.phantom_contact=true",
-                         "twin.contact.k_s=2000", "loop.round0_params=[E]"))
+                         "twin.contact.k_s=2000", "loop.method.round0_params=[E]"))
     rounds = json.loads((out / "rounds.json").read_text())
     assert rounds["effects"] == ["surface_contact"] and rounds["rounds"][0]["params_after"]["k_s"] == 2000.0
     assert "phantom_contact: true" in (out / "twin_fit" / "fitted.yaml").read_text()

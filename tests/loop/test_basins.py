@@ -6,6 +6,7 @@ from scipy.spatial import cKDTree
 
 from palpation.loop.basins import CAM, camera_starts, nominal_steps, procrustes
 from palpation.loop.config import LoopConfig
+from palpation.loop.method import Method
 from palpation.loop.engine import Problem, initial_params
 from palpation.loop.inputs import Target
 from palpation.loop.refit import finish
@@ -52,7 +53,7 @@ def test_the_finish_leaves_a_wrong_camera_basin_only_with_the_grid_start(basins)
                       n != "h") for n in AMP]
     start = initial_params({"cam_dx_px": -5.0})  # the search's best: the neighbouring basin (30 px away)
     p = Problem("toy", "k", targets, dict(start), list(CAM), candidates=[])
-    cfg = LoopConfig(polish_iters=6, polish_starts=1, final_refit_starts=1, camera_basins=basins).validate()
+    cfg = LoopConfig(method=Method(polish_iters=6, polish_starts=1, final_refit_starts=1, camera_basins=basins)).validate()
     fits = {"toy": {"ranked": [dict(start)]}}
     finish(cfg, [p], fits, simulate, {"toy"})
     if basins:
@@ -109,8 +110,7 @@ def test_a_strong_rotation_is_reached_only_with_the_rotation_axis(rotation):
                       n != "h") for n in AMP]
     start = initial_params({})  # the search's best: the camera nominal
     p = Problem("toy", "k", targets, dict(start), list(CAM), candidates=[])
-    cfg = LoopConfig(polish_iters=6, polish_starts=1, final_refit_starts=1, camera_grid_rotation=rotation,
-                     camera_grid_refine=3 if rotation else 0).validate()
+    cfg = LoopConfig(method=Method(polish_iters=6, polish_starts=1, final_refit_starts=1, camera_grid_rotation=rotation, camera_grid_refine=3 if rotation else 0)).validate()
     fits = {"toy": {"ranked": [dict(start)]}}
     finish(cfg, [p], fits, simulate_rot, {"toy"})
     err = {k: abs(p.params[k] - TRUTH_ROT[k]) for k in CAM}
@@ -140,7 +140,7 @@ def test_the_old_grid_is_kept_with_the_rotation_axis_off():
 
 @pytest.mark.parametrize("grid", [False, True])
 def test_the_final_refit_leaves_a_wrong_rotation_basin_only_with_the_converged_grid(grid):
-    """loop.camera_grid_converged: the final refit of a set with the camera also starts from the rotation grid
+    """loop.method.camera_grid_converged: the final refit of a set with the camera also starts from the rotation grid
     at the final twin's physics; without it the LM chains stay in the wrong basin they start in."""
     from palpation.loop.refit import converge
     rng = np.random.default_rng(2)
@@ -160,13 +160,13 @@ def test_the_final_refit_leaves_a_wrong_rotation_basin_only_with_the_converged_g
 @pytest.mark.parametrize("on", [False, True])
 def test_a_null_try_with_the_camera_gets_the_rotation_grid_only_when_asked(on):
     """refit.finish: the problems named in `converged_basins` (the round's null tries) get the rotation grid's
-    start with loop.camera_grid_converged, whatever the grid of the tries that add the camera."""
+    start with loop.method.camera_grid_converged, whatever the grid of the tries that add the camera."""
     rng = np.random.default_rng(3)
     truth = initial_params(TRUTH_ROT)
     targets = [Target(State(n, "press", 2.0), toy_rot(State(n, "press"), truth) + rng.normal(0, 0.05, REST.shape),
                       n != "h") for n in AMP]
     p = Problem("toy~null", "k", targets, initial_params({}), list(CAM), candidates=[])
-    cfg = LoopConfig(polish_iters=6, polish_starts=1, final_refit_starts=1, camera_grid_converged=on).validate()
+    cfg = LoopConfig(method=Method(polish_iters=6, polish_starts=1, final_refit_starts=1, camera_grid_converged=on)).validate()
     fits = {p.name: {"ranked": [dict(p.params)]}}
     finish(cfg, [p], fits, simulate_rot, (), (), {p.name})
     assert fits[p.name]["polish"]["chains"] == (2 if on else 1)

@@ -5,6 +5,7 @@ import pytest
 
 from palpation.loop.compete import Winner, challenge, worth_trying
 from palpation.loop.config import LoopConfig, SearchSettings
+from palpation.loop.method import Method
 from palpation.loop.engine import Problem, evaluate, initial_params, run_rounds
 from palpation.loop.inputs import Target
 from palpation.loop.simulate import State
@@ -45,8 +46,7 @@ def run(tmp_path, truth: dict, candidates: list[str], compete: bool) -> Problem:
                       n != "h") for n in AMP]
     p = Problem("toy", "toykey", targets, initial_params({"E": E0, "alpha": ALPHA0}), ["E"],
                 candidates=list(candidates), noise_px=NOISE)
-    c = LoopConfig(effects=list(candidates), tries_per_round=2, pair_tries=2, compete=compete,
-                   search=SearchSettings(sampler="random", n_trials=8, n_startup=8)).validate()
+    c = LoopConfig(effects=list(candidates), search=SearchSettings(sampler="random", n_trials=8, n_startup=8), method=Method(tries_per_round=2, pair_tries=2, compete=compete)).validate()
     evaluate([p], simulate)
     run_rounds([p], simulate, c, tmp_path / f"s{compete}.db", "toy", 1)
     return p

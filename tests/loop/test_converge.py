@@ -6,6 +6,7 @@ import pytest
 
 import palpation.loop.engine as engine
 from palpation.loop.config import LoopConfig, SearchSettings
+from palpation.loop.method import Method
 from palpation.loop.engine import Problem, evaluate, initial_params, run_rounds
 from palpation.loop.inputs import Target
 from palpation.loop.refit import converge, finish, subset_starts
@@ -50,7 +51,7 @@ def test_the_final_refit_runs_until_it_converges():
     out = converge([capped], simulate_valley, None, 3, 2.0)["v"]  # the cap before: 3 steps
     assert out["kept"] == 3 and not out["converged"] and out["after"]["fit"] > 1.5 * noise_mae
     p = valley_problem()
-    out = converge([p], simulate_valley, None, LoopConfig().final_refit_iters, 2.0)["v"]
+    out = converge([p], simulate_valley, None, LoopConfig().method.final_refit_iters, 2.0)["v"]
     assert out["converged"] and out["after"]["fit"] < 1.2 * noise_mae
     assert abs(p.params["shell_ratio"] - 2.0) < 0.05
 
@@ -89,8 +90,7 @@ def test_a_larger_set_starts_from_the_end_points_of_its_subsets(tmp_path, monkey
                       n != "h") for n in AMP]
     p = Problem("toy", "key", targets, initial_params({"E": E0, "alpha": 0.02}), ["E"],
                 candidates=["layered", "marker_anchor"], noise_px=NOISE)
-    cfg = LoopConfig(effects=["layered", "marker_anchor"], compete=True, nested_starts=nested,
-                     search=SearchSettings(sampler="random", n_trials=10, n_startup=10)).validate()
+    cfg = LoopConfig(effects=["layered", "marker_anchor"], search=SearchSettings(sampler="random", n_trials=10, n_startup=10), method=Method(compete=True, nested_starts=nested)).validate()
     evaluate([p], simulate)
     run_rounds([p], simulate, cfg, tmp_path / "s.db", "toy", 1)
     single = next(r for r in p.rounds if r["effects"] == ["layered"])
@@ -131,8 +131,7 @@ def test_the_final_refit_also_starts_from_the_last_null_try(tmp_path, refit_star
                       n != "h") for n in AMP]
     p = Problem("toy", "key", targets, initial_params({"E": E0, "alpha": 0.02}), ["E"],
                 candidates=["marker_anchor"], noise_px=NOISE)
-    cfg = LoopConfig(effects=["marker_anchor"], compete=True, final_refit_starts=refit_starts,
-                     search=SearchSettings(sampler="random", n_trials=8, n_startup=8)).validate()
+    cfg = LoopConfig(effects=["marker_anchor"], search=SearchSettings(sampler="random", n_trials=8, n_startup=8), method=Method(compete=True, final_refit_starts=refit_starts)).validate()
     evaluate([p], simulate_mimic)
     run_rounds([p], simulate_mimic, cfg, tmp_path / "s.db", "toy", 1)
     assert p.effects == [] and p.rounds and p.rounds[0]["after"] is not None and not p.rounds[0]["accepted"]
@@ -150,15 +149,15 @@ def test_the_verdict_says_when_the_final_refit_stopped_at_its_cap(converged):
     summ = {"fit": 0.5, "heldout": 0.6}
     p.final = {"refit": {"kept": 3, "starts": 1, "before": summ, "after": summ, "converged": converged}}
     text = "\n".join(verdict_lines(p, {"mean_px": 0.5, "target_mm": 0.25, "target_set": "measured_photos"}))
-    assert ("stopped at loop.final_refit_iters" in text) == (not converged)
+    assert ("stopped at loop.method.final_refit_iters" in text) == (not converged)
 
 
 @pytest.mark.parametrize("null", [True, False])
 def test_the_null_try_is_finished_to_convergence(null):
     # 60-run self-test at 78096aa: the tries after the null start from its end point and take more LM steps from
     # there, so with an unconverged null an extra effect passed the gate on those steps alone (8 spurious third
-    # effects). loop.null_converge: the round's null tries (named by the engine) go on to final_refit_iters steps.
-    cfg = LoopConfig(polish_iters=1, final_refit_iters=10).validate()
+    # effects). loop.method.null_converge: the round's null tries (named by the engine) go on to final_refit_iters steps.
+    cfg = LoopConfig(method=Method(polish_iters=1, final_refit_iters=10)).validate()
     p = valley_problem()
     p.trust = {}
     fits = {"v": {"ranked": [dict(p.params)]}}

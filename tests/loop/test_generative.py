@@ -252,8 +252,8 @@ def test_app_generative_mode_writes_the_table(tmp_path):
         cfg = compose(config_name="loop", overrides=[
             f"mesh={tmp_path / 'mesh.npz'}", f"measured={tmp_path / 'geometry'}", "track=false", "progress=false",
             f"out.dir={out}", "mode=generative", "loop.max_frames=30", "loop.search.n_trials=2",
-            "loop.search.n_startup=1", "loop.tries_per_round=1", "loop.pair_tries=0", "loop.polish_iters=0",
-            "loop.final_refit_iters=0", "loop.effects=[surface_contact,camera]", "loop.selftest.states=[press,twist_x]",
+            "loop.search.n_startup=1", "loop.method.tries_per_round=1", "loop.method.pair_tries=0", "loop.method.polish_iters=0",
+            "loop.method.final_refit_iters=0", "loop.effects=[surface_contact,camera]", "loop.selftest.states=[press,twist_x]",
             "loop.selftest.holdout=[twist_x]", "loop.generative.runs=2", "loop.generative.max_rounds=1",
             "loop.generative.n_effects=[0,1]", "loop.generative.unlisted_share=0.5",
             "loop.generative.dev_seeds=[2]"])

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from palpation.loop.config import LoopConfig, SearchSettings
+from palpation.loop.method import Method
 from palpation.loop.engine import Problem, evaluate, initial_params, run_rounds
 from palpation.loop.inputs import Target
 from palpation.loop.compete import Winner
@@ -53,18 +54,18 @@ def test_an_idle_extra_effect_is_refused_against_its_projected_null(on):
                 ["E", "shell_ratio"], effects=["layered"], noise_px=NOISE)
     evaluate([p], simulate)
     stalled = (p.summary(), dict(p.params), p.markers.copy(), None, list(p.searched), None)
-    cfg = LoopConfig(effects=["marker_anchor"], final_refit_iters=10, projected_null=on).validate()
+    cfg = LoopConfig(effects=["marker_anchor"], method=Method(final_refit_iters=10, projected_null=on)).validate()
     near = {**truth, "E": truth["E"] * 1.03, "shell_ratio": 1.97, "marker_anchor": 0.01}  # the try's end point
     w = Problem("w", "key", p.targets, dict(near), ["E", "shell_ratio", "marker_anchor"])
     evaluate([w], simulate)
     win = Winner(("marker_anchor",), {}, dict(w.params), w.markers.copy(), list(w.searched), [], w.summary())
     held = [i for i, t in enumerate(p.targets) if not t.fit]
     real = [p.targets[i].markers for i in held]
-    args = (cfg.min_improvement_px, cfg.min_improvement_rel, cfg.gate_fit_rel, cfg.gate_z)
+    args = (cfg.method.min_improvement_px, cfg.method.min_improvement_rel, cfg.method.gate_fit_rel, cfg.method.gate_z)
     ok_null, _ = decide(stalled[0], win.summary, heldout_z(real, [stalled[2][i] for i in held],
                                                            [win.markers[i] for i in held]), *args)
     assert ok_null  # the gate against the stalled null lets the idle anchor through
-    out = recheck(cfg, [p], {"toy": win}, {"toy": stalled}, simulate) if cfg.projected_null else {}
+    out = recheck(cfg, [p], {"toy": win}, {"toy": stalled}, simulate) if cfg.method.projected_null else {}
     kept = ok_null and out.get("toy", {"ok": True})["ok"]
     assert kept != on
     if on:
@@ -81,8 +82,7 @@ def test_a_real_effect_passes_its_projected_null(tmp_path):
                       n != "h") for n in AMP]
     p = Problem("toy", "key", targets, initial_params({"E": E0, "alpha": 0.02, "shell_ratio": 1.0}),
                 ["E", "shell_ratio"], effects=["layered"], candidates=["marker_anchor"], noise_px=NOISE)
-    cfg = LoopConfig(effects=["marker_anchor"], compete=True, polish_iters=1, projected_null=True,
-                     search=SearchSettings(sampler="random", n_trials=6, n_startup=6, trust_factor=1.0)).validate()
+    cfg = LoopConfig(effects=["marker_anchor"], search=SearchSettings(sampler="random", n_trials=6, n_startup=6, trust_factor=1.0), method=Method(compete=True, polish_iters=1, projected_null=True)).validate()
     evaluate([p], simulate)
     run_rounds([p], simulate, cfg, tmp_path / "s.db", "toy", 1)
     rec = next(r for r in p.rounds if r["effects"] == ["marker_anchor"])

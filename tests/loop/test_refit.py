@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from palpation.loop.config import LoopConfig, SearchSettings
+from palpation.loop.method import Method
 from palpation.loop.effects import PARAMS
 from palpation.loop.engine import Problem, evaluate, initial_params, run_rounds
 from palpation.loop.inputs import Target
@@ -44,8 +45,7 @@ def sim_of(cubic=0.0):
 
 
 def cfg(null_try: bool) -> LoopConfig:
-    return LoopConfig(effects=["mount"], tries_per_round=1, pair_tries=0, null_try=null_try,
-                      search=SearchSettings(sampler="random", n_trials=8, n_startup=8)).validate()
+    return LoopConfig(effects=["mount"], search=SearchSettings(sampler="random", n_trials=8, n_startup=8), method=Method(tries_per_round=1, pair_tries=0, null_try=null_try)).validate()
 
 
 def _loop(tmp_path, null_try: bool, mount_true: float) -> Problem:
@@ -110,8 +110,7 @@ def test_a_null_try_finished_by_the_local_solver_refuses_an_absorbing_effect(tmp
     cubic = 0.15
     p = problem({"E": E0, "mount_tilt_x_deg": 0.0}, start_E=E0 * 2.5, cubic=cubic)
     # projected_null off: it would refuse the mount by itself (its LM re-fit is a local finish too: test_projected)
-    c = LoopConfig(effects=["mount"], tries_per_round=1, pair_tries=0, null_try=True, polish_iters=polish_iters,
-                   projected_null=False, search=SearchSettings(sampler="random", n_trials=8, n_startup=8)).validate()
+    c = LoopConfig(effects=["mount"], search=SearchSettings(sampler="random", n_trials=8, n_startup=8), method=Method(tries_per_round=1, pair_tries=0, null_try=True, polish_iters=polish_iters, projected_null=False)).validate()
     evaluate([p], sim_of(cubic))
     run_rounds([p], sim_of(cubic), c, tmp_path / "s.db", "toy", 1)
     tried = [r for r in p.rounds if r["effects"] == ["mount"]][0]

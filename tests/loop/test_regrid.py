@@ -1,4 +1,4 @@
-"""loop.final_refit_regrid: the camera's rotation grid again at the final refit's own end point (loop.refit),
+"""loop.method.final_refit_regrid: the camera's rotation grid again at the final refit's own end point (loop.refit),
 on a toy camera with a stiffness-like parameter (no twin)."""
 
 import numpy as np
@@ -6,6 +6,7 @@ import pytest
 
 from palpation.loop.basins import CAM
 from palpation.loop.config import LoopConfig
+from palpation.loop.method import Method
 from palpation.loop.engine import Problem, initial_params
 from palpation.loop.inputs import Target
 from palpation.loop.refit import converge
@@ -53,7 +54,7 @@ def problem(noise_px=None) -> Problem:
 
 @pytest.mark.parametrize("regrid", [0, 1])
 def test_the_final_refit_leaves_a_wrong_rotation_basin_only_with_a_grid_at_its_end_point(regrid):
-    """The converged grid (loop.camera_grid_converged) runs at the final twin, whose wrong stiffness misleads it; the
+    """The converged grid (loop.method.camera_grid_converged) runs at the final twin, whose wrong stiffness misleads it; the
     refit's chains then end with the stiffness right and the rotation ~3 deg off, above 1 px. One more grid at that
     end point, where the stiffness is right, reaches the truth's basin."""
     p = problem()
@@ -84,13 +85,13 @@ def test_no_grid_pass_for_a_fit_at_the_noise():
 
 
 def test_a_negative_regrid_is_refused_in_one_line():
-    with pytest.raises(ValueError, match="loop.final_refit_regrid=-1"):
-        LoopConfig(final_refit_regrid=-1).validate()
+    with pytest.raises(ValueError, match="loop.method.final_refit_regrid=-1"):
+        LoopConfig(method=Method(final_refit_regrid=-1)).validate()
 
 
 @pytest.mark.parametrize("on", [False, True])
 def test_a_spurious_camera_basin_is_left_only_from_the_camera_off_start(on):
-    """loop.final_refit_off_starts (held-out seed 2, run 31's class): the data have the stiffness and no camera; the
+    """loop.method.final_refit_off_starts (held-out seed 2, run 31's class): the data have the stiffness and no camera; the
     final twin holds a camera kept in an early round, in a basin 8 deg off, with the stiffness 10 % off. LM from the
     final twin stays in that basin above 1 px; from its end point with the camera switched off (nominal) it reaches
     the truth, and the camera ends at nominal."""

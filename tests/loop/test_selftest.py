@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from palpation.loop.config import LoopConfig, SearchSettings, SelftestConfig
+from palpation.loop.method import Method
 from palpation.loop.inputs import load_targets
 from palpation.loop.real import base_params
 from palpation.loop.selftest import COLUMNS, UNLISTED, confusion, parse_case, rows_csv, run_selftest, summary
@@ -43,11 +44,9 @@ def test_unlisted_effects_move_markers_outside_the_candidates():
 
 def test_tiny_selftest_names_in_list_and_flags_out_of_list(tmp_path):
     mesh = cached_sensor_mesh("coarse", os.environ.get("PALPATION_MESH_CACHE"))
-    cfg = LoopConfig(effects=["surface_contact", "camera"], pair_tries=0,
-                     search=SearchSettings(n_trials=5, n_startup=3),
-                     selftest=SelftestConfig(cases=["surface_contact", "unlisted:marker_defect"], runs_per_case=1,
+    cfg = LoopConfig(effects=["surface_contact", "camera"], search=SearchSettings(n_trials=5, n_startup=3), selftest=SelftestConfig(cases=["surface_contact", "unlisted:marker_defect"], runs_per_case=1,
                                              strength_low=1.5, strength_high=2.0, states=["press", "twist_x"],
-                                             holdout=["twist_x"])).validate()
+                                             holdout=["twist_x"]), method=Method(pair_tries=0)).validate()
     twin = loop_twin_config(TwinConfig(), cfg.shell_thickness_mm * 1e-3)
     sim = LoopSimulator(mesh, twin, rest_template())
     rest = rest_template().astype(np.float32)

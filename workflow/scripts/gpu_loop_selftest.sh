@@ -38,8 +38,6 @@ if ! device_attach "$out" "$name"; then
   device_check_warp gpu_loop_selftest cpu hydra optuna || exit 3
   device_start "$out" "$name" python3 -m palpation.apps.loop "${sizes[@]}" track=false progress=false twin.device=cuda \
     mesh="$mesh" measured="$measured" loop.split_by_kind=false \
-    loop.final_refit_starts=3 loop.final_refit_iters=10 loop.compete=true loop.nested_starts=true loop.null_converge=true \
-    loop.camera_grid_converged=true loop.projected_null=true loop.final_refit_regrid=2 loop.final_refit_off_starts=true \
     loop.search.ask_workers="${ASK_WORKERS:-$(nproc)}" out.dir="$out" \
     hydra.run.dir="$out/hydra" "$@"
 fi

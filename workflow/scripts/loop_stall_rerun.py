@@ -6,8 +6,8 @@ OUTDIR: a self-test's output (hydra/.hydra/overrides.yaml, selftest.json). The r
 seed (selftest.remake_set). The end point is rebuilt from selftest.json: the injected effects' recovered parameters,
 every named effect not injected at its off value (their fitted values are not saved), E re-fitted alone (not saved
 either). Then the final refit (refit.converge through unexplained.check_all) and the final check, with MODE: `lm` (no
-camera grid), `grid` (loop.camera_grid_converged: the rotation grid at that point) or `regrid`
-(+ loop.final_refit_regrid=2 loop.final_refit_off_starts=true). Prints the fits, the end point and the verdict.
+camera grid), `grid` (loop.method.camera_grid_converged: the rotation grid at that point) or `regrid`
+(+ loop.method.final_refit_regrid=2 loop.method.final_refit_off_starts=true). Prints the fits, the end point and the verdict.
 """
 
 from __future__ import annotations
@@ -79,14 +79,14 @@ def main() -> None:
     p.params.update({n: PARAMS[n].default for e in named for n in EFFECTS[e].params})  # not injected: off
     p.params.update(row["recovered"])
     p.searched = ["E"]
-    polish([p], {p.name: [dict(p.params)]}, sim.simulate, {p.name: dict(loop.search.bounds)}, loop.final_refit_iters)
+    polish([p], {p.name: [dict(p.params)]}, sim.simulate, {p.name: dict(loop.search.bounds)}, loop.method.final_refit_iters)
     evaluate([p], sim.simulate)
     print("end point (E re-fitted alone):", p.params["E"], p.summary())
     p.effects, p.candidates = list(named), [c for c in loop.effects if c not in named]
     p.searched = ["E", *[n for e in named for n in EFFECTS[e].params]]
-    loop.camera_grid_converged = a.mode != "lm"
-    loop.final_refit_regrid = 2 if a.mode == "regrid" else 0
-    loop.final_refit_off_starts = a.mode == "regrid"
+    loop.method.camera_grid_converged = a.mode != "lm"
+    loop.method.final_refit_regrid = 2 if a.mode == "regrid" else 0
+    loop.method.final_refit_off_starts = a.mode == "regrid"
     t = time.time()
     check_all([p], sim.simulate, loop, {p.name: p.noise_px})
     print(a.mode, "final refit:", p.final.get("refit"), f"{time.time() - t:.0f} s")

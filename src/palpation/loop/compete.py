@@ -65,7 +65,7 @@ def challenge(targets, winner: Winner, effects, summary: dict, markers: np.ndarr
     """(replace the winner?, why): the gate of the candidate against the winner, and back."""
     held = [i for i, t in enumerate(targets) if not t.fit]
     real = [targets[i].markers for i in held]
-    args = (cfg.min_improvement_px, cfg.min_improvement_rel, cfg.gate_fit_rel, cfg.gate_z)
+    args = (cfg.method.min_improvement_px, cfg.method.min_improvement_rel, cfg.method.gate_fit_rel, cfg.method.gate_z)
     w = "+".join(winner.effects)
     ok, why = decide(winner.summary, summary, heldout_z(real, [winner.markers[i] for i in held],
                                                         [markers[i] for i in held]), *args)
@@ -104,11 +104,11 @@ def enter(cfg, p, queue: dict, attempt: int, winners: dict, item: dict, rec: dic
         w.record["after"]["gate"]["why"] += f"; replaced by {label}"
         rec["after"]["gate"]["why"] += f"; {why}"
     winners[p.name] = mine
-    if not cfg.compete:
+    if not cfg.method.compete:
         queue[p.name] = []  # the first set that passes is kept (the loop before issue 13's competition)
         return True
     n = sum(t.fit for t in p.targets) * p.markers.shape[1] * 2
-    quiet = at_noise(a, n, p.noise_px, cfg.unexplained_ratio)
+    quiet = at_noise(a, n, p.noise_px, cfg.method.unexplained_ratio)
     q = queue[p.name]
     queue[p.name] = q[:attempt + 1] + [it for it in q[attempt + 1:] if worth_trying(it["effects"], mine, quiet)]
     return True

@@ -219,18 +219,18 @@ def trust_region(p: Problem, names, factor: float, overrides: Mapping | None = N
 def round_plan(p: Problem, att, sigs: list[Signature], cond: dict[str, Signature], residual: np.ndarray,
                cfg: LoopConfig) -> list[dict]:
     """What to try this round, in order: single effects of the BIC-best subset by rank
-    (cfg.tries_per_round), then pairs tried jointly (cfg.pair_tries): dependent pairs and pairs of the
+    (cfg.method.tries_per_round), then pairs tried jointly (cfg.method.pair_tries): dependent pairs and pairs of the
     BIC-best subset / top of the ranking (attribution.joint_candidates). Pairs are tried only after every
     single try failed the gate."""
     by = {s.effect: s for s in sigs}
-    singles = [r["effect"] for r in att.ranking if r["effect"] in att.best_subset][:cfg.tries_per_round]
+    singles = [r["effect"] for r in att.ranking if r["effect"] in att.best_subset][:cfg.method.tries_per_round]
     plan = [{"effects": (e,), "sigs": [by[e]], "share": att.share_of(e)} for e in singles]
-    if cfg.pair_tries > 0:
+    if cfg.method.pair_tries > 0:
         pool = [*att.best_subset, *[r["effect"] for r in att.ranking[:3]]]
         requires = {e: EFFECTS[e].requires for e in p.candidates}
         pairs = joint_candidates(residual, sigs, cond, requires, pool, MIN_RMS_PX)
         plan += [{"effects": d["effects"], "sigs": d["sigs"], "share": d["share"], "pair": True}
-                 for d in pairs[:cfg.pair_tries]]
+                 for d in pairs[:cfg.method.pair_tries]]
     return plan
 
 
@@ -242,7 +242,7 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
     passes the gate (loop.gate) is kept; if none does, the loop stops.
     `progress`: a tqdm bar over the rounds, and one per recalibration over its trials.
     """
-    steps = dict(cfg.steps)
+    steps = dict(cfg.method.steps)
     rounds = bar(range(1, max_rounds + 1), desc="loop rounds", unit="round", enabled=progress)
     for k in rounds:
         active = [p for p in problems if not p.done and p.candidates]
@@ -273,7 +273,7 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
             if not trying:
                 break
             warm, extra = {}, []
-            if attempt == 0 and cfg.null_try:  # re-fit without a new effect, in the same twin batches
+            if attempt == 0 and cfg.method.null_try:  # re-fit without a new effect, in the same twin batches
                 for p in [p for p in trying if before[p.name][4]]:  # something to re-fit
                     q, starts = null_problem(p, before[p.name][4], trust_region(p, before[p.name][4],
                                              cfg.search.trust_factor, cfg.search.bounds), before[p.name][5],
@@ -287,7 +287,7 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                 p.trust = trust_region(p, old, cfg.search.trust_factor, cfg.search.bounds)
                 estimates = linear_estimate(p, item["effects"], before[p.name][5], item["sigs"], refits[p.name],
                                             steps, cfg.search.bounds)
-                nested = subset_starts(ends[p.name], item["effects"]) if cfg.nested_starts else []
+                nested = subset_starts(ends[p.name], item["effects"]) if cfg.method.nested_starts else []
                 warm[p.name] = [dict(before[p.name][1]), *nested, *estimates]  # nested: loop.refit
             fits = recalibrate([*trying, *extra], simulate, cfg.search, db_path, f"r{k}t{attempt}", twin_key, warm,
                                progress=progress)
@@ -296,7 +296,7 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
             # every try (null too) at its local optimum; a try that adds the camera also from its best other basin
             finish(cfg, [*trying, *extra], fits, simulate,
                    {p.name for p in trying if "camera" in queue[p.name][attempt]["effects"]},
-                   {q.name for q in extra} if cfg.null_converge else (), {q.name for q in extra})
+                   {q.name for q in extra} if cfg.method.null_converge else (), {q.name for q in extra})
             diverged = evaluate([*trying, *extra], simulate, strict=False)
             for q in extra:  # a diverged null try leaves the previous twin as the only reference
                 nulls[q.name[:-len(NULL)]] = None if q.name in diverged else (q.summary(), q.markers, fits[q.name])
@@ -319,15 +319,15 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                 held = [i for i, t in enumerate(p.targets) if not t.fit]
                 evidence = heldout_z([p.targets[i].markers for i in held], [b_markers[i] for i in held],
                                      [p.markers[i] for i in held])
-                ok, why = decide(b, a, evidence, cfg.min_improvement_px, cfg.min_improvement_rel, cfg.gate_fit_rel,
-                                 cfg.gate_z)
+                ok, why = decide(b, a, evidence, cfg.method.min_improvement_px, cfg.method.min_improvement_rel, cfg.method.gate_fit_rel,
+                                 cfg.method.gate_z)
                 after = {**a, "fit_result": fits[p.name], "gate": {**evidence, "why": why}}
                 if nulls.get(p.name) is not None:  # and beyond what re-fitting alone reached (refit.py)
                     n_sum, n_markers, n_fit = nulls[p.name]
                     ev0 = heldout_z([p.targets[i].markers for i in held], [n_markers[i] for i in held],
                                     [p.markers[i] for i in held])
-                    ok0, why0 = decide(n_sum, a, ev0, cfg.min_improvement_px, cfg.min_improvement_rel,
-                                       cfg.gate_fit_rel, cfg.gate_z)
+                    ok0, why0 = decide(n_sum, a, ev0, cfg.method.min_improvement_px, cfg.method.min_improvement_rel,
+                                       cfg.method.gate_fit_rel, cfg.method.gate_z)
                     after["gate_null"] = {**ev0, "why": why0, "fit": n_sum["fit"], "heldout": n_sum["heldout"],
                                           "params": n_fit["params_final"],
                                           "converged": n_fit.get("polish", {}).get("converged")}
@@ -345,7 +345,7 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                          b["fit"], a["fit"], rec["after"]["gate"]["why"], "kept" if ok else "rejected")
                 # the next try starts from the round's twin; the winner is applied when the round ends
                 p.params, p.markers, p.searched = dict(b_params), b_markers, list(b_searched)
-        proj = recheck(cfg, active, winners, before, simulate) if cfg.projected_null and cfg.null_try else {}
+        proj = recheck(cfg, active, winners, before, simulate) if cfg.method.projected_null and cfg.method.null_try else {}
         for name, r in proj.items():  # the winner against its projected null (loop.projected)
             w = winners[name]
             w.record["after"]["gate_projected"] = r
@@ -362,10 +362,10 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
         for p in active:
             if not p.done and not any(r["round"] == k and r["accepted"] for r in p.rounds):
                 p.done = True  # every try of this round was rejected
-                if nulls.get(p.name) is not None and cfg.final_refit_starts > 1:  # the same set re-fitted: a
-                    p.starts = [nulls[p.name][2]["params_final"], *p.starts][:cfg.final_refit_starts - 1]  # start
-                if "params" in proj.get(p.name, {}) and cfg.final_refit_starts > 1:  # the projected null's end
-                    p.starts = [proj[p.name]["params"], *p.starts][:cfg.final_refit_starts - 1]
+                if nulls.get(p.name) is not None and cfg.method.final_refit_starts > 1:  # the same set re-fitted: a
+                    p.starts = [nulls[p.name][2]["params_final"], *p.starts][:cfg.method.final_refit_starts - 1]  # start
+                if "params" in proj.get(p.name, {}) and cfg.method.final_refit_starts > 1:  # the projected null's end
+                    p.starts = [proj[p.name]["params"], *p.starts][:cfg.method.final_refit_starts - 1]
         if on_round is not None:
             on_round(k, problems)
         rounds.set_postfix_str(f"{sum(not p.done for p in problems)} of {len(problems)} going", refresh=False)

@@ -75,7 +75,7 @@ def pick_effects(candidates: list[str], n: int, rng: np.random.Generator, presen
 
 def draw(cfg: LoopConfig, base: Mapping[str, float], seed: int, run: int, attempt: int = 0) -> Injection:
     """The truth of run `run` of `seed` (module docstring), from its own stream; `attempt` > 0: a redraw."""
-    g, steps = cfg.generative, dict(cfg.steps)
+    g, steps = cfg.generative, dict(cfg.method.steps)
     rng = np.random.default_rng([seed, run, attempt] if attempt else [seed, run])
     kinds = sorted(g.unlisted)
     outside = kinds[int(rng.integers(len(kinds)))] if kinds and rng.uniform() < g.unlisted_share else None

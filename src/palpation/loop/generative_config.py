@@ -93,7 +93,7 @@ class GenerativeConfig:
         for e, (_, hi) in self.strengths.items():  # every dof at the top strength, either sign where allowed
             for d in EFFECTS[e].dofs:
                 for sign in ((1,) if d.nonneg or len(EFFECTS[e].dofs) == 1 else (1, -1)):
-                    moved = move({n: PARAMS[n].default for n, _, _ in d.moves}, d, sign * hi, loop.steps)
+                    moved = move({n: PARAMS[n].default for n, _, _ in d.moves}, d, sign * hi, loop.method.steps)
                     out = [n for n, v in moved.items() if not bounds(n, loop.search.bounds)[0] <= v
                            <= bounds(n, loop.search.bounds)[1]]
                     if out:

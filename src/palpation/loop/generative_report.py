@@ -118,7 +118,7 @@ def markdown(rows: list[dict], summ: Mapping, meta: Mapping) -> str:
 def write_outputs(out: Path, rows: list[dict], loop) -> dict:
     """loop_selftest_general.csv, selftest_general.md and .json in `out`; returns the summary."""
     g = loop.generative
-    summ = summary(rows, g.noise_px, loop.gate_fit_rel)
+    summ = summary(rows, g.noise_px, loop.method.gate_fit_rel)
     meta = {"fingerprint": rows[0]["fingerprint"] if rows else "none", "n_effects": list(g.n_effects), "E": list(g.E),
             "k_s": list(g.k_s), "unlisted_share": g.unlisted_share, "unlisted": sorted(g.unlisted),
             "noise_px": g.noise_px, "max_rounds": g.max_rounds, "states": list(loop.selftest.states),

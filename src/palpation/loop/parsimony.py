@@ -11,7 +11,8 @@ every added effect (with the effects that act through it: friction goes with con
    needed and goes.
 The least needed effect goes first and the rest are tested again; an effect that goes leaves the named set, the
 searched parameters and the twin file (its parameters back at their off values). Effects the starting twin had
-are not judged. Each problem's record lands in p.parsimony.
+are not judged. Each problem's record lands in p.parsimony. Which sets get step 2 is loop.method.prune's choice
+(loop.unexplained.check_all): none ("inert": step 1 only), the sets still above the noise, or all.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The projected null (`loop.projected_null`, issue 13: self-test runs 28 and 48).
+"""The projected null (`loop.method.projected_null`, issue 13: self-test runs 28 and 48).
 
 The round's null try re-fits the current set from the round's starting twin. When that twin sits in a
 stall (the previous round's set ended above the noise and its LM chain cannot leave that point), the null
@@ -12,7 +12,7 @@ viscous 0.29 px with k_s and mu at the truth).
 The check: the round's winner is projected onto the old set (its new effects' parameters back at the
 round's starting values, i.e. off) and that point is re-fitted without the new effects by Levenberg-Marquardt
 to final_refit_iters steps; the winner is finished to the same cap, so both are compared at their optima
-(the budget fairness of loop.null_converge). The winner is kept only if it passes the gate (loop.gate.decide)
+(the budget fairness of loop.method.null_converge). The winner is kept only if it passes the gate (loop.gate.decide)
 against the projected null as it did against the null try. A nested set contains its subset's optimum
 (loop.refit.subset_starts); this is the converse: a subset's fit must have seen the superset's end point.
 """
@@ -62,21 +62,21 @@ def recheck(cfg, problems: list, winners: dict, before: dict, simulate) -> dict[
         pairs.append((p, w, q, v))
     if not pairs:
         return {}
-    iters = max(cfg.polish_iters, cfg.final_refit_iters)
+    iters = max(cfg.method.polish_iters, cfg.method.final_refit_iters)
     probs = [x for _, _, q, v in pairs for x in (q, v)]
     limits = {x.name: {**cfg.search.bounds, **x.trust} for x in probs}
     starts = {q.name: [dict(q.params)] for _, _, q, _ in pairs}
     starts.update({v.name: [dict(v.params), *w.starts] for _, w, _, v in pairs})
     res = polish(probs, starts, simulate, limits, iters)
     diverged = evaluate(probs, simulate, strict=False)
-    args = (cfg.min_improvement_px, cfg.min_improvement_rel, cfg.gate_fit_rel, cfg.gate_z)
+    args = (cfg.method.min_improvement_px, cfg.method.min_improvement_rel, cfg.method.gate_fit_rel, cfg.method.gate_z)
     out = {}
     for p, w, q, v in pairs:
         held = [i for i, t in enumerate(p.targets) if not t.fit]
         real = [p.targets[i].markers for i in held]
         if v.name not in diverged:  # the winner at its optimum, kept as converge() keeps the final refit
             a = v.summary()
-            if refit_kept(p.targets, w.markers, v.markers, w.summary["fit"], a["fit"], cfg.gate_z):
+            if refit_kept(p.targets, w.markers, v.markers, w.summary["fit"], a["fit"], cfg.method.gate_z):
                 w.params, w.markers, w.summary = dict(v.params), v.markers.copy(), a
         if q.name in diverged:  # nothing to compare with: the winner stands
             out[p.name] = {"ok": True, "why": f"projected null diverged at {diverged[q.name]}"}

@@ -42,7 +42,7 @@ def make_problem(mset: MeasuredSet, source: str, cfg: LoopConfig, base: Mapping[
     """A problem from any measured set: its states are checked before anything is simulated."""
     targets = load_targets(mset, source, cfg.holdout if holdout is None else holdout,
                            cfg.states if states is None else states, cfg.twist_z_angle)
-    searched = list(dict.fromkeys(cfg.recalibrate))
+    searched = list(dict.fromkeys(cfg.method.recalibrate))
     for e in effects_on:
         searched += [n for n in EFFECTS[e].params if n not in searched]
     cands = [e for e in (cfg.effects if candidates is None else candidates) if e not in effects_on]
@@ -53,10 +53,10 @@ def make_problem(mset: MeasuredSet, source: str, cfg: LoopConfig, base: Mapping[
 def round_zero(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path, tkey: str,
                progress: bool = False) -> None:
     """Fit `round0_params` (the calibrated twin before any effect) and record round 0."""
-    if cfg.calibrate_round0:
+    if cfg.method.calibrate_round0:
         searched = {p.name: p.searched for p in problems}
         for p in problems:
-            p.searched = list(cfg.round0_params)
+            p.searched = list(cfg.method.round0_params)
         fits = recalibrate(problems, simulate, cfg.search, db_path, "r0", tkey,
                            {p.name: [dict(p.params)] for p in problems}, progress=progress)
         for p in problems:
@@ -77,7 +77,7 @@ def reference_attribution(p: Problem, simulate, cfg: LoopConfig) -> dict:
     round 0 recalibrates E, so an effect whose signature the stiffness absorbs there still shows."""
     evaluate([p], simulate)
     p.refit = refit_dofs(p)
-    sigs, _, _ = signatures([p], simulate, dict(cfg.steps))
+    sigs, _, _ = signatures([p], simulate, dict(cfg.method.steps))
     fit_ix = [i for i, t in enumerate(p.targets) if t.fit]
     att = attribute(np.stack([p.markers[i] - p.targets[i].markers for i in fit_ix]), sigs[p.name],
                     min_rms_px=MIN_RMS_PX)

@@ -17,13 +17,13 @@ contact fit left), and the final check reads it as unexplained. Two guards, both
 * the final refit also starts from the **last null try's end point** when the last round kept nothing: it is the
   same effect set re-fitted, and it was thrown away with the round (60-run H200 self-test, contact + mount run 31:
   the round-2 null try reached a held-out of 0.26 px, the final twin stayed at 1.84 px); within
-  loop.final_refit_starts;
-* **nested starts** (`subset_starts`, loop.nested_starts): a set's search also starts from the end point of
+  loop.method.final_refit_starts;
+* **nested starts** (`subset_starts`, loop.method.nested_starts): a set's search also starts from the end point of
   every subset of it tried earlier in the round (the null try's is the empty set), with the new effects off.
   A larger set contains each subset's optimum, so it can only fit as well or better; from its own warm starts
   alone a 6-parameter contact + camera search ended at a fit of 2.50 px where contact alone had reached
   2.05 px (60-run H200 self-test, run 36), and the pair then lost to the single it contains;
-* **passes after the final refit** (`after_passes`, opt-in: loop.final_refit_off_starts, loop.final_refit_regrid):
+* **passes after the final refit** (`after_passes`, opt-in: loop.method.final_refit_off_starts, loop.method.final_refit_regrid):
   LM again from the refit's own end point, with each added effect switched off, then with the camera's rotation grid
   at that point, for sets still above the noise (held-out seed 2, runs 31 and 39: converged stalls of a set that
   contains the truth).
@@ -79,7 +79,7 @@ def subset_starts(ends, effects) -> list[dict]:
     return [dict(params) for done, params in ends if done < new]
 
 
-CONVERGED_REFINE = 3  # the rotation grid's halvings at converged physics (loop.camera_grid_converged; loop.basins)
+CONVERGED_REFINE = 3  # the rotation grid's halvings at converged physics (loop.method.camera_grid_converged; loop.basins)
 
 
 def refit_kept(targets, markers_before, markers_after, fit_before: float, fit_after: float, z_crit: float) -> bool:
@@ -94,17 +94,19 @@ def refit_kept(targets, markers_before, markers_after, fit_before: float, fit_af
 
 def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_crit: float,
              camera_grid: bool = False, steps: Mapping[str, float] | None = None, regrid: int = 0,
-             ratio: float = 2.0, off_starts: bool = False) -> dict[str, dict]:
+             ratio: float = 2.0, off_starts: bool = False, stiffness=()) -> dict[str, dict]:
     """The final refit: Levenberg-Marquardt (loop.polish) on every problem's searched parameters from its
     current twin and p.starts (the last kept try's other distinct best trials), all problems in one batch
     per step. The end point is kept only if the fitted MAE falls and the held-out change is not
     significantly worse (z >= -z_crit); else the twin stays. Returns per problem the fit/held-out MAE
     before and after, the LM iterations kept and the starts. Then, for sets still above `ratio` x their noise,
-    passes from the refit's own end point (`after_passes`): `off_starts` (loop.final_refit_off_starts) one with each
-    added effect switched off, `regrid` (loop.final_refit_regrid) up to that many with the camera's rotation grid."""
+    passes from the refit's own end point (`after_passes`): `off_starts` (loop.method.final_refit_off_starts) one with each
+    added effect switched off, `stiffness` (loop.method.stiffness_starts) one from E and k_s scaled by each factor,
+    `regrid` (loop.method.final_refit_regrid) up to that many with the camera's rotation grid."""
     from palpation.loop.engine import evaluate
 
-    log_ = {p.name: {"before": p.summary(), "kept": 0, "converged": True, "regrid": 0, "off": 0} for p in problems}
+    log_ = {p.name: {"before": p.summary(), "kept": 0, "converged": True, "regrid": 0, "off": 0, "stiff": 0}
+            for p in problems}
     going = [p for p in problems if p.searched]
     old = {p.name: (dict(p.params), p.markers) for p in going}
     starts = {p.name: [dict(p.params), *p.starts] for p in going}
@@ -125,21 +127,21 @@ def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_cri
             log_[p.name].update(kept=res[p.name]["kept"], starts=res[p.name]["chains"],
                                 converged=res[p.name]["converged"])
     after_passes([p for p in going if p.name not in diverged], simulate, limits, iters, z_crit, ratio, old, log_,
-                 steps, regrid, off_starts)
+                 steps, regrid, off_starts, stiffness)
     for p in problems:
         log_[p.name]["after"] = p.summary()
         x = log_[p.name]
-        if x["kept"] or x["regrid"] or x["off"]:
-            extra = "".join(f", {n} {what} pass(es) kept" for n, what in ((x["off"], "effect-off"),
-                                                                          (x["regrid"], "camera regrid")) if n)
+        if x["kept"] or x["regrid"] or x["off"] or x["stiff"]:
+            extra = "".join(f", {n} {what} pass(es) kept" for n, what in (
+                (x["off"], "effect-off"), (x["stiff"], "stiffness"), (x["regrid"], "camera regrid")) if n)
             log.info("loop '%s': final refit, %d LM step(s) from %d start(s)%s: fit MAE %.3f -> %.3f px%s", p.name,
                      x["kept"], x.get("starts", 0), extra, x["before"]["fit"], x["after"]["fit"],
-                     "" if x["converged"] else " (stopped at loop.final_refit_iters, not converged)")
+                     "" if x["converged"] else " (stopped at loop.method.final_refit_iters, not converged)")
     return log_
 
 
 def effect_off_starts(p, limits: Mapping | None) -> list[dict]:
-    """loop.final_refit_off_starts: the twin with each added effect switched off (its parameters back at their off
+    """loop.method.final_refit_off_starts: the twin with each added effect switched off (its parameters back at their off
     values), for the effects whose off point lies inside the search box (not surface contact: k_s = 0). The converse
     of the nested starts at the end: a set's final refit also sees the basins of its subsets, reached from its own end
     point. An effect kept in an early round can hold a compensating basin after a later effect arrived, and the
@@ -154,9 +156,26 @@ def effect_off_starts(p, limits: Mapping | None) -> list[dict]:
     return out
 
 
+STIFFNESS = ("E", "k_s")  # scaled together: a soft sensor and a soft contact trade against each other
+
+
+def stiffness_starts(p, factors, limits: Mapping | None) -> list[dict]:
+    """loop.method.stiffness_starts: the twin with E and, where contact is on, k_s scaled by each factor (clipped to
+    the search box). The soft-E basin: with friction and a second effect, the search can settle where E is far below
+    the truth while damping or the mount take the friction's signal; LM from the end point alone stays in it."""
+    names = [n for n in STIFFNESS if n in p.searched and p.params.get(n, 0) > 0]
+    return [clip({**p.params, **{n: p.params[n] * f for n in names}}, limits) for f in factors] if names else []
+
+
+def above_noise(problems: list, ratio: float) -> list:
+    """The problems whose fitted residual stays above `ratio` x their noise (p.noise_px; the final check's size)."""
+    return [p for p in problems if not at_noise(p.summary(), sum(t.fit for t in p.targets) * p.targets[0].markers.size,
+                                                p.noise_px, ratio)]
+
+
 def after_passes(problems: list, simulate, limits: Mapping | None, iters: int, z_crit: float, ratio: float,
                  old: Mapping[str, tuple], log_: dict, steps: Mapping[str, float] | None, regrid: int,
-                 off_starts: bool) -> None:
+                 off_starts: bool, stiffness=()) -> None:
     """Passes of LM from the final refit's own end point, each kept as the refit is (fit falls, held-out against
     the twin before the refit not significantly worse: refit_kept), for the sets whose fitted residual stays above
     `ratio` x their noise (p.noise_px; the final check's size: at the noise there is no basin left to find):
@@ -171,8 +190,7 @@ def after_passes(problems: list, simulate, limits: Mapping | None, iters: int, z
     lims = {p.name: {**(limits or {}), **p.trust} for p in problems}
 
     def above(ps):
-        return [p for p in ps if not at_noise(p.summary(), sum(t.fit for t in p.targets) * p.targets[0].markers.size,
-                                              p.noise_px, ratio)]
+        return above_noise(ps, ratio)
 
     def one_pass(todo, extra, key):  # LM from the end point and `extra` starts; the problems whose pass was kept
         prev = {p.name: (dict(p.params), p.markers, p.summary()["fit"]) for p in todo}
@@ -196,6 +214,11 @@ def after_passes(problems: list, simulate, limits: Mapping | None, iters: int, z
         todo = [p for p in problems if offs.get(p.name)]
         if todo:
             one_pass(todo, offs, "off")
+    if stiffness:
+        stiff = {p.name: stiffness_starts(p, stiffness, lims[p.name]) for p in above(problems)}
+        todo = [p for p in problems if stiff.get(p.name)]
+        if todo:
+            one_pass(todo, stiff, "stiff")
     todo = list(problems)
     for _ in range(regrid):
         todo = above(todo)
@@ -212,26 +235,26 @@ def finish(cfg: LoopConfig, problems: list, fits: dict[str, dict], simulate, bas
     (and, for the problems named in `basins`, the camera's best other basin: loop.basins); fits[name] gains
     `polish` (fitted MAE before/after), `params_final` and `starts` (the next-best distinct trials the final
     refit also starts from) in place of the search's ranked trials. The problems named in `converge` (the
-    round's null tries, loop.null_converge) go on to final_refit_iters steps in all while still descending; those
-    named in `converged_basins` (the null tries, loop.camera_grid_converged) get the rotation grid's start."""
+    round's null tries, loop.method.null_converge) go on to final_refit_iters steps in all while still descending; those
+    named in `converged_basins` (the null tries, loop.method.camera_grid_converged) get the rotation grid's start."""
     limits = {p.name: {**cfg.search.bounds, **p.trust} for p in problems}
     starts = {p.name: distinct_starts(fits[p.name].pop("ranked"), p.searched, limits[p.name],
-                                      max(cfg.polish_starts, cfg.final_refit_starts)) for p in problems}
-    grid = camera_starts([p for p in problems if p.name in basins], simulate, limits, nominal_steps(cfg.steps),
-                         cfg.camera_grid_rotation, cfg.camera_grid_refine) if cfg.camera_basins else {}
-    if cfg.camera_grid_converged:  # the null tries' (converged physics; loop.camera_grid_converged)
+                                      max(cfg.method.polish_starts, cfg.method.final_refit_starts)) for p in problems}
+    grid = camera_starts([p for p in problems if p.name in basins], simulate, limits, nominal_steps(cfg.method.steps),
+                         cfg.method.camera_grid_rotation, cfg.method.camera_grid_refine) if cfg.method.camera_basins else {}
+    if cfg.method.camera_grid_converged:  # the null tries' (converged physics; loop.method.camera_grid_converged)
         grid.update(camera_starts([p for p in problems if p.name in converged_basins and p.name not in grid], simulate,
-                                  limits, nominal_steps(cfg.steps), True, CONVERGED_REFINE))
+                                  limits, nominal_steps(cfg.method.steps), True, CONVERGED_REFINE))
     for name, s in grid.items():  # the camera's best other basin as one more start (loop.basins)
-        starts[name] = [*starts[name][:cfg.polish_starts], s, *starts[name][cfg.polish_starts:]]
-    if cfg.polish_iters > 0:
-        # the round's null tries (`converge`, loop.null_converge) go on to final_refit_iters steps: the tries after
+        starts[name] = [*starts[name][:cfg.method.polish_starts], s, *starts[name][cfg.method.polish_starts:]]
+    if cfg.method.polish_iters > 0:
+        # the round's null tries (`converge`, loop.method.null_converge) go on to final_refit_iters steps: the tries after
         # the null start from its end point (nested starts) and take more steps from there, so an extra effect would
         # otherwise win by the optimiser's extra steps, not by what it models (60-run self-test, 26 Nov: 8
         # spurious third effects, docs/loop.md)
-        iters = {p.name: max(cfg.polish_iters, cfg.final_refit_iters) if p.name in converge else cfg.polish_iters
+        iters = {p.name: max(cfg.method.polish_iters, cfg.method.final_refit_iters) if p.name in converge else cfg.method.polish_iters
                  for p in problems}
-        done = polish(problems, {n: s[:cfg.polish_starts + (n in grid)] for n, s in starts.items()}, simulate,
+        done = polish(problems, {n: s[:cfg.method.polish_starts + (n in grid)] for n, s in starts.items()}, simulate,
                       limits, iters)
         log.info("local finish of %d tries: %d twin jobs; fitted MAE %.3f -> %.3f px (mean)", len(problems),
                  next(iter(done.values()))["jobs_all"] if done else 0,
@@ -239,6 +262,6 @@ def finish(cfg: LoopConfig, problems: list, fits: dict[str, dict], simulate, bas
                  np.nanmean([d.get("fit_end", np.nan) for d in done.values()]))
     for p in problems:
         fits[p.name]["params_final"] = dict(p.params)
-        fits[p.name]["starts"] = starts[p.name][1:cfg.final_refit_starts]  # the best: the twin continues from it
-        if cfg.polish_iters > 0:
+        fits[p.name]["starts"] = starts[p.name][1:cfg.method.final_refit_starts]  # the best: the twin continues from it
+        if cfg.method.polish_iters > 0:
             fits[p.name]["polish"] = done[p.name]

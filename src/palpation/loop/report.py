@@ -141,7 +141,7 @@ def verdict_lines(p: Problem, meta: Mapping) -> list[str]:
                  f"{rf.get('starts', 1)} start(s)): fitted MAE "
                  f"{rf['before']['fit']:.2f} → {rf['after']['fit']:.2f} px, held-out {rf['before']['heldout']:.2f} → "
                  f"{rf['after']['heldout']:.2f} px"
-                 + ("." if rf.get("converged", True) else "; stopped at loop.final_refit_iters while still descending, "
+                 + ("." if rf.get("converged", True) else "; stopped at loop.method.final_refit_iters while still descending, "
                     "so the residual below is partly what the search left."))
     t = f.get("test")
     if t:

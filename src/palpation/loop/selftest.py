@@ -107,7 +107,7 @@ def _draw(cfg: LoopConfig, base: Mapping[str, float], run: int, r: int, inl: lis
           rng: np.random.Generator) -> Injection:
     """Run `run` (the r-th of its case): a strength per effect from the r-th of runs_per_case equal slices of
     [low, high] (stratified), then a random direction over each in-list effect's dofs."""
-    st, steps = cfg.selftest, dict(cfg.steps)
+    st, steps = cfg.selftest, dict(cfg.method.steps)
     span = st.strength_high - st.strength_low
     on, params = base_for(inl, cfg, base)
     strengths, betas = {}, {}

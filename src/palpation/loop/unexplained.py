@@ -174,28 +174,34 @@ def check_all(problems: list, simulate, cfg, sigmas: Mapping[str, float]) -> Non
     last round's signatures (a round that kept an effect); the result lands in problem.final."""
     from palpation.loop.engine import evaluate, refit_dofs, signatures
     from palpation.loop.parsimony import prune
-    from palpation.loop.refit import converge
+    from palpation.loop.refit import above_noise, converge
 
     evaluate([p for p in problems if p.markers is None], simulate)
+    m, limits = cfg.method, cfg.search.bounds
     polished = {}
-    if cfg.final_refit_iters > 0:  # test what the twin cannot reach, not what the search left (loop.refit)
-        polished = converge(problems, simulate, cfg.search.bounds, cfg.final_refit_iters, cfg.gate_z,
-                            cfg.camera_grid_converged, dict(cfg.steps), cfg.final_refit_regrid, cfg.unexplained_ratio,
-                            cfg.final_refit_off_starts)
-    if cfg.prune:  # the named set: only the added effects the final twin needs (loop.parsimony)
-        prune(problems, simulate, {p.name: {**cfg.search.bounds, **p.trust} for p in problems}, cfg.final_refit_iters,
-              cfg.gate_z)
+    if m.final_refit_iters > 0:  # test what the twin cannot reach, not what the search left (loop.refit)
+        polished = converge(problems, simulate, limits, m.final_refit_iters, m.gate_z, m.camera_grid_converged,
+                            dict(m.steps), m.final_refit_regrid, m.unexplained_ratio, m.final_refit_off_starts,
+                            m.stiffness_starts)
+    if m.prune != "off":  # the named set: only the added effects the final twin needs (loop.parsimony)
+        # the effects of these sets are also re-fitted without each (else only switched off: inert or not)
+        refit = {"inert": set(), "all": {p.name for p in problems},
+                 "above_noise": {p.name for p in above_noise(problems, m.unexplained_ratio)}}[m.prune]
+        for group, iters in (([p for p in problems if p.name not in refit], 0),
+                             ([p for p in problems if p.name in refit], m.final_refit_iters)):
+            if group:
+                prune(group, simulate, {p.name: {**limits, **p.trust} for p in group}, iters, m.gate_z)
     stale = [p for p in problems if p.last_signatures is None or p.last_signatures["params"] != p.params]
     for p in stale:
         p.refit = refit_dofs(p)
     if stale:
-        sigs, refits, conds = signatures(stale, simulate, dict(cfg.steps))
+        sigs, refits, conds = signatures(stale, simulate, dict(cfg.method.steps))
         for p in stale:
             p.last_signatures = {"params": dict(p.params), "sigs": sigs[p.name], "refit": refits[p.name],
                                  "cond": conds[p.name], "refit_dofs": list(p.refit)}
     for p in problems:
         s = p.last_signatures
         p.final = final_check(p, s["sigs"], s["cond"], s["refit"], s["refit_dofs"], sigmas[p.name],
-                              cfg.unexplained_alpha, cfg.unexplained_ratio)
+                              cfg.method.unexplained_alpha, cfg.method.unexplained_ratio)
         if p.name in polished:
             p.final["refit"] = polished[p.name]

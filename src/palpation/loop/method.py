@@ -1,0 +1,104 @@
+"""The loop's method: its mechanisms and thresholds, the same in every profile and in the self-tests.
+
+Profiles (conf/loop/{quick,paper,tiny}.yaml) differ only in size: mesh, trials, states. What the loop *does*
+lives here, as `loop.method` (a group of LoopConfig): each switch was measured on self-test seeds that choose
+mechanisms (the fixed list's seeds, then the generative dev seeds, docs/loop.md "Mechanisms") and is set to the
+value that paid. Change one only to measure it, e.g. `loop.method.compete=false`; the generative self-test's
+fingerprint includes the method, so a run made under another method is never mixed into a table.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from palpation.config_ranges import Choice, DictOf, Int, ListOf, Num, ranged
+from palpation.loop.effects import PARAMS
+
+PRUNE_MODES = ("off", "inert", "above_noise", "all")
+
+
+@dataclass
+class Method:
+    # --- the rounds (loop.engine) -----------------------------------------------------------------------------
+    # an effect is kept if the held-out MAE falls by min(min_improvement_px, min_improvement_rel x its value):
+    # 0.05 px on the photos, less near a noise floor (self-test sets sit at ~0.25 px)
+    min_improvement_px: float = ranged(0.05, Num(ge=0))
+    min_improvement_rel: float = ranged(0.05, Num(ge=0))
+    tries_per_round: int = ranged(2, Int(ge=1))  # single effects tried per round, best-ranked first
+    pair_tries: int = ranged(2, Int(ge=0))  # then effect pairs fitted jointly (dependent pairs, the BIC-best subset)
+    # gate (loop.gate): a fit that falls this much is kept if the held-out does not move beyond gate_z cluster
+    # standard errors either way
+    gate_fit_rel: float = ranged(0.3, Num(gt=0, le=1))
+    gate_z: float = ranged(2.0, Num(gt=0))
+    # compensation guards (loop.refit, loop.projected): every round also re-fits the current parameters with no new
+    # effect (the null try) and an effect must beat it too; the null try is finished to final_refit_iters
+    # (null_converge) so an extra effect cannot win on the optimiser's extra steps; the round's winner is also gated
+    # against its projected null (its new effects off at its end point, the rest re-fitted)
+    null_try: bool = True
+    null_converge: bool = True
+    projected_null: bool = True
+    # a set that passes the gate does not end the round: smaller sets, and larger ones while the residual stays
+    # above the noise, may replace it (loop.compete)
+    compete: bool = True
+    # a set's search also starts from the end point of every subset tried earlier in the round (loop.refit)
+    nested_starts: bool = True
+    # the camera's other basins (loop.basins): a grid of principal points, f and rotation in closed form, at the
+    # search's physics (camera_basins; rotation and refinement there measured worse: off) and at converged physics
+    # (the null tries and the final refit: camera_grid_converged)
+    camera_basins: bool = True
+    camera_grid_rotation: bool = False
+    camera_grid_refine: int = ranged(0, Int(ge=0))
+    camera_grid_converged: bool = True
+    # --- the local finish (loop.polish) and the final refit (loop.refit.converge) --------------------------------
+    polish_iters: int = ranged(2, Int(ge=0))  # Levenberg-Marquardt steps finishing every try (0 = off)
+    polish_starts: int = ranged(1, Int(ge=1))  # from its best distinct trials
+    # the final refit: up to final_refit_iters LM steps (a chain stops once a step gains < 0.1 %) from the final
+    # twin and final_refit_starts - 1 more distinct trials of the last kept try
+    final_refit_iters: int = ranged(10, Int(ge=0))
+    final_refit_starts: int = ranged(3, Int(ge=1))
+    # passes after the final refit while the residual stays above unexplained_ratio x the noise: LM with each added
+    # effect switched off, then up to final_refit_regrid camera rotation grids at the refit's end point
+    final_refit_off_starts: bool = True
+    final_refit_regrid: int = ranged(2, Int(ge=0))
+    # --- the verdict (loop.parsimony, loop.unexplained) ------------------------------------------------------------
+    # which added effects leave the named set and the twin file after the final refit (loop.parsimony):
+    #   inert        switched off at the final parameters, no state changes significantly (gate_z);
+    #   above_noise  inert, and for sets still above unexplained_ratio x the noise also every effect the held-out
+    #                does not significantly need once the rest is re-fitted (an outside effect is absorbed by extra
+    #                terms that each buy a little);
+    #   all          that re-fit test for every set (generative dev seed 0, 12 CPU runs: exact sets 8 -> 7 of 10);
+    #   off          the rounds' names stand
+    prune: str = ranged("inert", Choice(*PRUNE_MODES))
+    # a guard against the soft-E basin: for sets still above unexplained_ratio x the noise after the final refit, LM
+    # once more from its end point with E (and the contact stiffness, where contact is on) scaled by each factor
+    stiffness_starts: list[float] = ranged(rule=ListOf(Num(gt=0), 0), factory=lambda: [2.0, 0.5])
+    # the final check: an unexplained residual is one above unexplained_ratio x the noise and significant at alpha
+    unexplained_alpha: float = ranged(1.0e-3, Num(gt=0, lt=1))
+    unexplained_ratio: float = ranged(2.0, Num(gt=0))
+    # --- what is re-fitted besides the effects ---------------------------------------------------------------------
+    calibrate_round0: bool = True  # fit `round0_params` before any effect (round 0 = the calibrated twin)
+    round0_params: list[str] = ranged(rule=ListOf(Choice(*PARAMS), 0, unique=True), factory=lambda: ["E"])
+    recalibrate: list[str] = ranged(rule=ListOf(Choice(*PARAMS), 0, unique=True), factory=lambda: ["E"])
+    steps: dict[str, float] = ranged(rule=DictOf(Num(gt=0)), factory=dict)  # nominal step per parameter (effects.py)
+
+    def validate(self) -> "Method":
+        for where, names in (("loop.method.round0_params", self.round0_params),
+                             ("loop.method.recalibrate", self.recalibrate), ("loop.method.steps", list(self.steps))):
+            unknown = [n for n in names if n not in PARAMS]
+            if unknown:
+                raise ValueError(f"{where}: unknown parameter(s) {unknown}; known: {sorted(PARAMS)}")
+        checks = {"final_refit_regrid": self.final_refit_regrid >= 0, "camera_grid_refine": self.camera_grid_refine >= 0,
+                  "tries_per_round": self.tries_per_round >= 1, "pair_tries": self.pair_tries >= 0,
+                  "final_refit_iters": self.final_refit_iters >= 0, "polish_iters": self.polish_iters >= 0,
+                  "polish_starts": self.polish_starts >= 1, "final_refit_starts": self.final_refit_starts >= 1,
+                  "gate_fit_rel": 0 < self.gate_fit_rel <= 1, "gate_z": self.gate_z > 0,
+                  "unexplained_alpha": 0 < self.unexplained_alpha < 1, "unexplained_ratio": self.unexplained_ratio > 0}
+        if self.prune not in PRUNE_MODES:
+            raise ValueError(f"loop.method.prune={self.prune}: need one of {PRUNE_MODES}")
+        bad = [k for k, ok in checks.items() if not ok]
+        if bad:
+            raise ValueError(f"{', '.join(f'loop.method.{k}={getattr(self, k)}' for k in bad)} out of range: iters, "
+                             "regrid, refine, pair_tries >= 0; starts, tries >= 1; 0 < gate_fit_rel <= 1; gate_z, "
+                             "unexplained_ratio > 0; 0 < unexplained_alpha < 1")
+        return self
+
