@@ -18,7 +18,8 @@ import cv2
 import numpy as np
 
 from palpation.markers.detect import CIRCLE_CENTRE_PX, RatioDetector, load_gray
-from palpation.markers.photoset import list_photos, order_photo, state_name
+from palpation.markers.manifest import state_name
+from palpation.markers.photoset import list_photos, order_photo
 from palpation.markers.template import rest_template
 from palpation.paths import FLAT_TIP_PHOTOS
 

@@ -2,7 +2,8 @@
 
 import pytest
 
-from palpation.markers.photoset import list_photos, reference_pipeline_baselines, state_name
+from palpation.markers.manifest import state_name
+from palpation.markers.photoset import list_photos, reference_pipeline_baselines
 from palpation.paths import FLAT_TIP_PHOTOS
 
 REST = "press_press_depth=0_angle=10_slide_length=50_timestamp=2025-08-30-21-23-00.jpg"

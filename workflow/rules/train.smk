@@ -280,9 +280,9 @@ if TWIN_ABL_LOOP_RUN != TRAIN_RUN:
 
 
 # With train.seeds_together the ablation's seeds train in one process per twin too, as the main sweep's do (its rows
-# move within seed noise, as the sweep's did when its seeds were stacked; README "Wall time"): one job of
-# train.threads instead of one a seed, whose cores the clip-length trainings waited for on the paper profile's critical
-# path (issue 17).
+# move within seed noise, as the sweep's did when its seeds were stacked; docs/journal/2026-11-28-readme-history.md,
+# "Wall time"): one job of train.threads instead of one a seed, whose cores the clip-length trainings waited for on the
+# paper profile's critical path (issue 17).
 if TRAIN["seeds_together"] and TWIN_ABL["seeds"]:
     _TWIN_ABL_TWINS = ["calibrated"] + (["loop"] if TWIN_ABL_LOOP_RUN != TRAIN_RUN else [])
 

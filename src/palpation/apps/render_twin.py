@@ -13,7 +13,7 @@ from omegaconf import DictConfig
 
 from palpation.config_check import app_main
 from palpation.config_ranges import ListOf, Text
-from palpation.twin.render import render
+from palpation.figures.twin_render import render
 
 log = logging.getLogger(__name__)
 RANGES = {"manifests": ListOf(Text())}  # checked before any work (config_ranges)

@@ -23,24 +23,15 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
 from palpation.config_check import app_main
-from palpation.model.config import ModelConfig, TrainConfig
 from palpation.model.gpu_slots import shared_cuda
-from palpation.model.job import TrainJob, run_job, run_jobs_together
+from palpation.model.job import TrainJob, job_from_settings, run_job, run_jobs_together
 
 log = logging.getLogger(__name__)
-RECIPE_KEYS = ("lr", "weight_decay", "focal_gamma", "norm_stats", "norm_clips", "rotation", "schedule",
-               "step_size", "step_gamma", "jitter_px", "marker_dropout", "displacement_scale", "patience",
-               "select_metric", "calibration", "remove_common_motion")
 
 
 def job_from_config(cfg: DictConfig) -> TrainJob:
-    """Plain dataclasses from the composed config (the only place that reads the DictConfig)."""
-    c = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)  # the choice keys' enums as their strings
-    c.pop("hydra", None)
-    train = TrainConfig(**{k: c["recipe"][k] for k in RECIPE_KEYS}, **c["train"], device=c["device"])
-    return TrainJob(config_name=c["config_name"], seed=int(c["seed"]), clip_len=int(c["clip_len"]),
-                    train_on=c["train_on"], test_on=c["test_on"], data=c["data"],
-                    model=ModelConfig(**c["model"]), train=train, rest=c["graph"]["rest"])
+    """Plain dataclasses from the composed config (the only place that reads the DictConfig); enums as strings."""
+    return job_from_settings(OmegaConf.to_container(cfg, resolve=True, enum_to_str=True))
 
 
 def _overrides() -> dict:

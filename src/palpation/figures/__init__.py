@@ -2,6 +2,6 @@
 
 calibration (Fig. 4, search history), markers_overlay (detected markers on photos), loop (residual
 quivers, mode shares, rounds), pr_curves (Fig. 6), maps (Fig. 7 confusion maps, threshold selection),
-realdata (Meat and Silicone set overviews), twin_render (the twin's marker figure and video frames,
-written by twin/render.py).
+realdata (Meat and Silicone set overviews), twin_render (the twin's marker figure and one video per
+simulated trajectory).
 """

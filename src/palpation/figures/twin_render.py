@@ -1,10 +1,16 @@
-"""The twin's renders: rest vs deformed markers at the deepest frame (figure) and one video frame.
+"""The twin's renders: rest vs deformed markers at the deepest frame (figure) and one MP4 per trajectory.
 
-Used by `twin/render.py`, which reads the simulate stage's trajectories and writes the figure and MP4s.
+Reads only the simulate stage's outputs (trajectory npz files listed in manifests). The figure shows
+each trajectory at its frame of largest mean marker displacement from rest (the deepest contact),
+with displacements magnified; the videos show every recorded frame (slides every 2nd) with the
+projected vessel centreline while in contact and the positive markers of the 30 px label rule.
+
+Run it through the Hydra app `python -m palpation.apps.render_twin` (rule render_twin).
 """
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 
@@ -16,8 +22,11 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from palpation.camera import DEFAULT_CAMERA, IMAGE_SIZE_PX  # noqa: E402
-from palpation.io import save_figure  # noqa: E402
+from palpation.io import atomic_path, save_figure  # noqa: E402
+from palpation.twin.output import load_trajectory, read_sim_manifest  # noqa: E402
 
+log = logging.getLogger(__name__)
+FPS = 30
 ARROW_GAIN = 3.0  # displacement magnification in the figure
 VIDEO_SCALE = 0.5  # 1920x1080 -> 960x540
 
@@ -82,3 +91,36 @@ def markers_figure(trajectories: list[tuple[str, dict]], stem: str | os.PathLike
     out = save_figure(fig, stem)
     plt.close(fig)
     return out
+
+
+def write_video(traj: dict, path: Path, name: str) -> Path:
+    step = 2 if len(traj["markers"]) > 200 else 1  # keep slides to ~5 s
+    frames = [draw_frame(traj, f, name) for f in range(0, len(traj["markers"]), step)]
+    h, w = frames[0].shape[:2]
+    with atomic_path(path, suffix=".mp4") as tmp:
+        writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), FPS, (w, h))
+        if not writer.isOpened():
+            raise ValueError(f"OpenCV cannot open an mp4v writer for {path}; check the OpenCV build")
+        for img in frames:
+            writer.write(img)
+        writer.release()
+    return path
+
+
+def trajectory_files(manifests: list[Path]) -> list[Path]:
+    return [f for m in manifests for f in read_sim_manifest(m, "run the simulate stage first", allow_empty=True)[1]]
+
+
+def render(manifests: list[Path], out_dir: Path) -> list[Path]:
+    """Figure `markers.png/.pdf` of all trajectories and one `<name>.mp4` each, under `out_dir`."""
+    files = trajectory_files(manifests)
+    if not files:
+        raise ValueError(f"no trajectory files listed in {[str(m) for m in manifests]}")
+    outputs, panels = [], []
+    for path in files:
+        traj = load_trajectory(path)
+        name = f"{path.parent.name}/{path.stem}"
+        panels.append((name, traj))
+        outputs.append(write_video(traj, out_dir / f"{path.parent.name}_{path.stem}.mp4", name))
+        log.info("rendered %s (%d frames)", name, len(traj["markers"]))
+    return outputs + markers_figure(panels, out_dir / "markers")

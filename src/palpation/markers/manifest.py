@@ -34,6 +34,18 @@ def state_label(kind: str, depth_mm: float, angle_deg: float | None) -> str:
     return f"{kind}_d{depth_mm:g}" + (f"_a{angle_deg:g}" if angle_deg is not None else "")
 
 
+def state_name(path: str | os.PathLike) -> str:
+    """Short state name from a paper-style photo name: press_d4, twist_x_d2_a20, sensor_default_state, ...
+
+    The kind is the name's prefix, so a press at 0 mm stays `press_d0` although its trajectory is rest.
+    """
+    stem = Path(path).name
+    if stem.startswith("sensor_default_state"):
+        return "sensor_default_state"
+    info = parse_photo_name(stem)
+    return state_label(stem.split("_press_depth=")[0], info["depth_mm"], info["angle_deg"])
+
+
 def _rows(path: Path) -> list[dict]:
     """Raw rows of a .csv or .yaml/.yml manifest (a list of mappings, or {photos: [...]})."""
     fix = f"write a CSV/YAML table with columns {', '.join(COLUMNS)} (docs/measured_format.md)"
@@ -109,8 +121,6 @@ def read_manifest(path: str | os.PathLike, photos_dir: str | os.PathLike) -> lis
 
 def paper_names(photos: list[Path]) -> list[PhotoInfo]:
     """PhotoInfo from the paper's file names (`parse_photo_name`)."""
-    from palpation.markers.photoset import state_name
-
     out = []
     for p in photos:
         info = parse_photo_name(p.name)

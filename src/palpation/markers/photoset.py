@@ -19,6 +19,7 @@ import numpy as np
 
 from palpation.markers.detect import BlobDetector, RatioDetector, check_covers_circle, detect_markers, load_gray
 from palpation.markers.lattice import N_MARKERS, base_graph_order, median_spacing_px, neighbours
+from palpation.markers.manifest import PhotoInfo, paper_names, state_name
 from palpation.markers.order import order_to_template, warp_template
 from palpation.markers.template import require_full_set
 from palpation.measured import MeasuredSet, MeasuredState, make_measured_set, parse_photo_name
@@ -26,17 +27,6 @@ from palpation.measured import MeasuredSet, MeasuredState, make_measured_set, pa
 log = logging.getLogger(__name__)
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png"}
 _TRAJECTORY_RANK = {"rest": 0, "press": 1, "twist_z": 2, "twist_x": 3, "slide": 4}
-
-
-def state_name(path: str | os.PathLike) -> str:
-    """Short state name from a photo name: press_d4, twist_x_d2_a20, sensor_default_state, ..."""
-    stem = Path(path).name
-    if stem.startswith("sensor_default_state"):
-        return "sensor_default_state"
-    info = parse_photo_name(stem)
-    kind = stem.split("_press_depth=")[0]
-    name = f"{kind}_d{info['depth_mm']:g}"
-    return name + (f"_a{info['angle_deg']:g}" if info["angle_deg"] is not None else "")
 
 
 def list_photos(directory: str | os.PathLike) -> list[Path]:
@@ -79,8 +69,6 @@ def measure_photos(photos: list, template: np.ndarray, rest_photo: str,
 
     `photos`: paths with the paper's names, or `manifest.PhotoInfo` from a manifest.
     """
-    from palpation.markers.manifest import PhotoInfo, paper_names
-
     infos = [p if isinstance(p, PhotoInfo) else paper_names([Path(p)])[0] for p in photos]
     names = [i.path.name for i in infos]
     if rest_photo not in names:

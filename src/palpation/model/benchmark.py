@@ -35,7 +35,7 @@ from palpation.graph.layout import rest_layout
 from palpation.graph.synthetic import write_sim
 from palpation.io import save_json
 from palpation.metrics.scores import load_scores
-from palpation.model.job import TrainJob, device_name, run_job, run_jobs_together
+from palpation.model.job import TrainJob, device_name, job_from_settings, run_job, run_jobs_together
 from palpation.paths import REPO_ROOT
 from palpation.tracking import git_commit
 
@@ -46,13 +46,12 @@ COMPARED = ("auroc", "ap", "fg_iou", "bg_iou", "mcc")
 def compose_job(experiment: str, device: str, sim: str, overrides: list[str]) -> TrainJob:
     """The job exactly as the train app composes it (conf/train.yaml), so the benchmark cannot drift."""
     from hydra import compose, initialize_config_dir
-
-    from palpation.apps.train import job_from_config
+    from omegaconf import OmegaConf
 
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="train", overrides=[f"experiment={experiment}", f"device={device}",
                                                       f"data.sim={sim}", "track=false", *overrides])
-    return job_from_config(cfg)
+    return job_from_settings(OmegaConf.to_container(cfg, resolve=True, enum_to_str=True))
 
 
 def _sync(device: str) -> None:

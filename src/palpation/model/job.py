@@ -39,6 +39,10 @@ from palpation.model.train import FitResult
 
 log = logging.getLogger(__name__)
 OUTPUTS = ("metrics.json", "scores.npz", "pr.npz", "checkpoint.pt")
+# the conf/recipe/ keys, which land in TrainConfig beside conf/train.yaml's `train:` section
+RECIPE_KEYS = ("lr", "weight_decay", "focal_gamma", "norm_stats", "norm_clips", "rotation", "schedule",
+               "step_size", "step_gamma", "jitter_px", "marker_dropout", "displacement_scale", "patience",
+               "select_metric", "calibration", "remove_common_motion")
 
 
 @dataclass(frozen=True)
@@ -52,6 +56,14 @@ class TrainJob:
     model: ModelConfig
     train: TrainConfig
     rest: str = "template"
+
+
+def job_from_settings(c: dict) -> TrainJob:
+    """The job of the train app's composed config as plain containers (conf/train.yaml's keys, resolved)."""
+    train = TrainConfig(**{k: c["recipe"][k] for k in RECIPE_KEYS}, **c["train"], device=c["device"])
+    return TrainJob(config_name=c["config_name"], seed=int(c["seed"]), clip_len=int(c["clip_len"]),
+                    train_on=c["train_on"], test_on=c["test_on"], data=c["data"],
+                    model=ModelConfig(**c["model"]), train=train, rest=c["graph"]["rest"])
 
 
 def device_name(device: str) -> str:

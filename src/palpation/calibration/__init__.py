@@ -1,0 +1,1 @@
+"""Optuna search of the twin parameters against the measured flat-tip photos (docs/calibration.md)."""
