@@ -30,7 +30,7 @@ from palpation.model.job import TrainJob, run_job, run_jobs_together
 log = logging.getLogger(__name__)
 RECIPE_KEYS = ("lr", "weight_decay", "focal_gamma", "norm_stats", "norm_clips", "rotation", "schedule",
                "step_size", "step_gamma", "jitter_px", "marker_dropout", "displacement_scale", "patience",
-               "select_metric", "calibration", "remove_common_motion")
+               "select_metric", "calibration", "remove_common_motion", "align", "align_stats", "select_on")
 
 
 def job_from_config(cfg: DictConfig) -> TrainJob:
