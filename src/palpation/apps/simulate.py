@@ -1,8 +1,11 @@
 """Hydra entry point: simulate a named trajectory set and write npz files + a manifest.
 
 Sets (conf/simulate.yaml): `canonical` (the four calibration interactions, vessel-free, reference
-parameters), `vessel_slide` (one slide over the vessel) and `randomised` (the SPEC §7 draws:
-heading offset, k_n, c_n per trial from one default_rng(seed) stream; even files have the vessel).
+parameters), `vessel_slide` (one slide over the vessel), `randomised` (the SPEC §7 draws:
+heading offset, k_n, c_n per trial from one default_rng(seed) stream; even files have the vessel) and
+`depth_bank` (vessel-free slides at the known depths `bank_depths_mm`: the lookup of palpation.transfer.latent).
+`dataset.depths_from` (null: SPEC's one slide depth) draws each randomised pair's depth over the real slides'
+estimated depths (a CSV of workflow/scripts/latent_depth.py; docs/transfer.md), from a stream of its own.
 """
 
 from __future__ import annotations
@@ -23,13 +26,15 @@ from palpation.twin.config import REF_LENGTH_SCALE, TwinConfig, from_reference_u
 from palpation.twin.mesh import SensorMesh
 from palpation.twin.output import copy_outputs, read_sim_manifest, write_outputs
 from palpation.twin.runner import EnvRequest, run_batches
+from palpation.twin.trajectory import MAX_DEPTH_MM
 
 log = logging.getLogger(__name__)
-SETS = ("canonical", "vessel_slide", "randomised")
+SETS = ("canonical", "vessel_slide", "randomised", "depth_bank")
 # settings of conf/simulate.yaml, checked before any work (config_ranges); the twin's are on TwinConfig
 RANGES = {"set": Choice(*SETS), "seed": SEED, "heading_offset_deg": Num(ge=-180, le=180), "n_pairs": Int(ge=1),
           "batch_size": Int(ge=1), "workers": Int(ge=0), "max_frames": Int(ge=1, null=True),
-          "reuse": ListOf(Text(), 0)}
+          "reuse": ListOf(Text(), 0), "dataset.depths_from": Text(null=True),
+          "bank_depths_mm": ListOf(Num(ge=0, le=MAX_DEPTH_MM), 2, unique=True, increasing=True)}
 
 CANONICAL = ("press", "twist_z", "twist_x", "slide")
 HEADING_RANGE_DEG = (-15.0, 15.0)  # SPEC §7 draws, k_n in reference units (x5 length scale)
@@ -54,8 +59,9 @@ def k_n_draw_range(recentre_on: float | None = None) -> tuple[float, float]:
 
 def trajectory_set(name: str, seed: int, n_pairs: int = 1,
                    heading_offset_deg: float = 0.0,
-                   k_n_ref_range: tuple[float, float] = K_N_REF_RANGE) -> list[EnvRequest]:
-    """The EnvRequests of a named set; parameters left None come from the twin config."""
+                   k_n_ref_range: tuple[float, float] = K_N_REF_RANGE, depths_mm=None) -> list[EnvRequest]:
+    """The EnvRequests of a named set; parameters left None come from the twin config. `depths_mm`: randomised,
+    one slide depth per pair (None: SPEC's); depth_bank, the bank's depths."""
     if name == "canonical":
         return [EnvRequest(kind=k, vessel=False, seed=seed, name=k) for k in CANONICAL]
     if name == "vessel_slide":
@@ -69,19 +75,42 @@ def trajectory_set(name: str, seed: int, n_pairs: int = 1,
                 heading = rng.uniform(*HEADING_RANGE_DEG)
                 k_n = from_reference_units(k_n=rng.uniform(*k_n_ref_range))["k_n"]
                 c_n = rng.uniform(*C_N_RANGE)
+                depth = None if depths_mm is None else float(depths_mm[i])
                 out.append(EnvRequest(kind="slide", heading_offset_deg=heading, k_n=k_n, c_n=c_n,
-                                      vessel=j == 0, seed=seed, name=f"trajectory_{2 * i + j:04d}"))
+                                      vessel=j == 0, seed=seed, name=f"trajectory_{2 * i + j:04d}", depth_mm=depth))
         return out
+    if name == "depth_bank":
+        if depths_mm is None or len(depths_mm) < 2:
+            raise ValueError("set=depth_bank needs bank_depths_mm, at least two depths (mm)")
+        return [EnvRequest(kind="slide", heading_offset_deg=heading_offset_deg, vessel=False, seed=seed,
+                           name=f"bank_{i:02d}", depth_mm=float(d)) for i, d in enumerate(depths_mm)]
     raise ValueError(f"unknown trajectory set '{name}': use one of {SETS}")
+
+
+def set_depths(cfg: DictConfig) -> list[float] | None:
+    """The depths the set's requests take: depth_bank's bank, or randomised pairs' draws over the real slides'
+    estimated depths (`dataset.depths_from`); None: SPEC's one slide depth."""
+    if cfg.set == "depth_bank":
+        return [float(d) for d in cfg.get("bank_depths_mm") or []]
+    source = cfg.get("dataset", {}).get("depths_from")
+    if source is None or cfg.set != "randomised":
+        return None
+    from palpation.transfer.latent import draw_depths, read_estimates
+
+    return draw_depths(read_estimates(source), cfg.n_pairs, cfg.seed).tolist()
 
 
 def request_key(cfg: DictConfig, k_n_range: tuple[float, float]) -> str:
     """sha256 of everything that decides a set's trajectories: the draws, the frame cut, the twin and the mesh file.
-    Not the batch size or threads (they change no record: twin.runner.run_batches) or the output folder."""
+    Not the batch size or threads (they change no record: twin.runner.run_batches) or the output folder. The depths
+    enter only where a set has its own (so every other set keeps its key)."""
     spec = {"set": cfg.set, "seed": cfg.seed, "n_pairs": cfg.n_pairs, "heading_offset_deg": cfg.heading_offset_deg,
             "k_n_range": list(k_n_range), "max_frames": cfg.max_frames,
             "twin": OmegaConf.to_container(cfg.twin, resolve=True),
             "mesh_sha256": hashlib.sha256(Path(cfg.mesh).read_bytes()).hexdigest()}
+    depths = set_depths(cfg)
+    if depths is not None:
+        spec["depths_mm"] = depths
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()
 
 
@@ -108,7 +137,7 @@ def run(cfg: DictConfig) -> dict:
         log.info("same request key as %s: its files copied to %s, nothing simulated", same, cfg.out.dir)
         return _tracked(cfg, {"manifest": str(manifest), "n_files": len(read_sim_manifest(manifest)[1]),
                               "n_failed": 0, "reused": 1})
-    requests = trajectory_set(cfg.set, cfg.seed, cfg.n_pairs, cfg.heading_offset_deg, k_n_range)
+    requests = trajectory_set(cfg.set, cfg.seed, cfg.n_pairs, cfg.heading_offset_deg, k_n_range, set_depths(cfg))
     records, failed = [], []
     start = time.perf_counter()
     for res in run_batches(mesh, twin, requests, cfg.batch_size, device=twin.device, progress=cfg.progress,

@@ -18,6 +18,7 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
 from palpation.config_ranges import SEED, Choice, DictOf, Int, ListOf, Num, Text, ranged
+from palpation.graph.align import METHODS as ALIGN_METHODS, STATS_FROM as ALIGN_STATS
 from palpation.graph.augment import ROTATION_MODES
 
 
@@ -46,9 +47,12 @@ Rotation = StrEnum("Rotation", {m: m for m in ROTATION_MODES})
 Schedule = StrEnum("Schedule", {m: m for m in ("none", "step")})
 SelectMetric = StrEnum("SelectMetric", {m: m for m in ("fg_iou", "ap")})
 Calibration = StrEnum("Calibration", {m: m for m in ("none", "temperature", "platt", "cross_real")})
+Align = StrEnum("Align", {m: m for m in ALIGN_METHODS})
+AlignStats = StrEnum("AlignStats", {m: m for m in ALIGN_STATS})
+SelectOn = StrEnum("SelectOn", {m: m for m in ("val", "other_real")})
 DATASETS = ("sim", "silicone", "meat")  # train_on / test_on: the sets graph.sources.load_dataset reads
 CHOICES = {"norm_stats": NormStats, "rotation": Rotation, "schedule": Schedule, "select_metric": SelectMetric,
-           "calibration": Calibration}
+           "calibration": Calibration, "align": Align, "align_stats": AlignStats, "select_on": SelectOn}
 
 
 @dataclass(frozen=True)
@@ -80,6 +84,14 @@ class TrainConfig:
     # opt-in input transform, off in every shipped recipe: each frame's whole-field translation taken off the
     # features (graph.features.without_common_motion; the real slides' drift that no twin reproduces)
     remove_common_motion: bool = False
+    # transfer options (docs/transfer.md), off in every shipped recipe. align: the scored set's raw features mapped
+    # onto the training clips' moments at scoring (graph.align: none | meanstd | coral) from the clips that
+    # align_stats names (other_real: inductive; test_set / test_sequence: the scored set's own inputs, transductive).
+    # select_on: the split that chooses the checkpoint, stops early and fits a calibration (val: the training
+    # domain's; other_real: the labelled real set other than the scored one, its val trials if it is the training set)
+    align: str = "none"
+    align_stats: str = "other_real"
+    select_on: str = "val"
     restarts: int = 1  # starts per seed, the best on val kept (palpation.model.restarts); 1 = the seed alone
     threshold: float = 0.5
     device: str = "cpu"
@@ -139,6 +151,9 @@ class RecipeSchema:
     select_metric: SelectMetric = MISSING
     calibration: Calibration = MISSING
     remove_common_motion: bool = MISSING
+    align: Align = MISSING
+    align_stats: AlignStats = MISSING
+    select_on: SelectOn = MISSING
     sizes: Dict[str, SizesSchema] = ranged(MISSING, DictOf(min_len=1))
 
 

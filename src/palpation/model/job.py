@@ -20,6 +20,7 @@ import numpy as np
 import torch
 
 from palpation import tracking
+from palpation.graph.align import clip_moments
 from palpation.graph.clips import ClipSet
 from palpation.graph.edges import clip_topology, spatial_edges
 from palpation.graph.layout import rest_layout
@@ -31,6 +32,7 @@ from palpation.metrics.classification import marker_metrics
 from palpation.metrics.scores import Scores, save_scores
 from palpation.model.checkpoint import checkpoint_bytes, save_checkpoint
 from palpation.model.config import ModelConfig, TrainConfig
+from palpation.model.domain import alignment, check_selection, selection_name, selection_sequences
 from palpation.model.evaluate import predict
 from palpation.model.stgnn import count_parameters
 from palpation.model.restarts import fit_restarts, fit_seeds_restarts
@@ -42,7 +44,7 @@ OUTPUTS = ("metrics.json", "scores.npz", "pr.npz", "checkpoint.pt")
 # the conf/recipe/ keys, which land in TrainConfig beside conf/train.yaml's `train:` section
 RECIPE_KEYS = ("lr", "weight_decay", "focal_gamma", "norm_stats", "norm_clips", "rotation", "schedule",
                "step_size", "step_gamma", "jitter_px", "marker_dropout", "displacement_scale", "patience",
-               "select_metric", "calibration", "remove_common_motion")
+               "select_metric", "calibration", "remove_common_motion", "align", "align_stats", "select_on")
 
 
 @dataclass(frozen=True)
@@ -87,7 +89,7 @@ def load_job_data(job: TrainJob) -> JobData:
     rest = rest_layout(job.rest)
     topo = clip_topology(spatial_edges(rest), job.clip_len)
     train = ClipSet(load_dataset(job.train_on, job.data[job.train_on], "train"), job.clip_len, rest)
-    val = ClipSet(load_dataset(job.train_on, job.data[job.train_on], "val"), job.clip_len, rest)
+    val = ClipSet(selection_sequences(job), job.clip_len, rest)  # the training domain's val split unless select_on
     test = load_test_set(job, rest)
     log.info("%s L=%d: %d train / %d val / %d test clips", job.config_name, job.clip_len, len(train), len(val),
              len(test))
@@ -127,6 +129,7 @@ def run_job(job: TrainJob, out_dir: str | Path, params: dict | None = None, trac
     if any(training_key(o) != training_key(job) or o.seed != job.seed or o.train != job.train for o, *_ in others):
         raise ValueError(f"also: configurations scored by {job.config_name}'s model must train alike (same seed, "
                          "training set, model and recipe); train the others apart")
+    check_selection([job] + [o for o, *_ in others])
     d = load_job_data(job)
     steps = []
 
@@ -184,6 +187,7 @@ def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: 
         raise ValueError(f"jobs trained together need every seed {seeds} once with every (test set, calibration) "
                          f"{outputs}")
     partner = {j.config_name: cross_real_partner(j, tests) for j in jobs if j.train.calibration == "cross_real"}
+    check_selection(jobs)
     d = load_job_data(first)
     results, restarts = fit_seeds_restarts(d.train, d.val, d.rest, d.topo, first.model, first.train, seeds,
                                            progress=progress)
@@ -192,14 +196,18 @@ def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: 
     together = {"seeds": seeds, "train_seconds": joint}
     if len(tests) > 1:
         together["configs"] = [name for name, _ in tests]
-    scored, test_sets = {}, {}
+    scored, test_sets, aligned = {}, {}, {}
+    source = clip_moments(d.train, d.rest, d.topo, first.train.remove_common_motion) if first.train.align != "none" \
+        else None
     for name, test_on in tests:  # each test set scored by all seeds at once; each job's share of the time
         job = next(j for j in jobs if (j.config_name, j.test_on) == (name, test_on))
         test_sets[name] = d.test if job.test_on == first.test_on and job.data == first.data \
             else load_test_set(job, d.rest)
         t0 = time.perf_counter()
+        align = alignment(job, d.train, test_sets[name], d.rest, d.topo, source)
+        aligned[name] = {"alignment": align.to_dict()} if align else {}
         per_seed = predict_seeds([r.model for r in results], [r.stats for r in results], test_sets[name], d.rest,
-                                 d.topo, first.train.batch_size, first.train.device, progress)
+                                 d.topo, first.train.batch_size, first.train.device, progress, align)
         share = (time.perf_counter() - t0) / len(seeds)
         scored.update({(name, s): (*p, share) for s, p in zip(seeds, per_seed)})
     out = []
@@ -216,7 +224,7 @@ def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: 
             if job.config_name in partner:  # the same seed's models' raw scores on the other real set
                 fit_on = (*scored[(partner[job.config_name], job.seed)][:2], partner[job.config_name])
             out.append(finish_job(job, result, replace(d, test=test_sets[job.config_name]), out_dir, track,
-                                  progress, {**restarts[job.seed], "trained_together": together},
+                                  progress, {**restarts[job.seed], "trained_together": together, **aligned[job.config_name]},
                                   scored[(job.config_name, job.seed)],
                                   fit_on))
     return out
@@ -240,11 +248,14 @@ def finish_job(job: TrainJob, result: FitResult, d: JobData, out_dir: str | Path
     that calibration=cross_real is fitted on."""
     out_dir = Path(out_dir)
     rest, topo, val, test = d.rest, d.topo, d.val, d.test
+    transfer = {"selected_on": selection_name(job)} if job.train.select_on != "val" else {}
     if scored is None:
         t0 = time.perf_counter()
+        align = alignment(job, d.train, test, rest, topo)
         probs, labels = predict(result.model, test, result.stats, rest, topo, job.train.batch_size,
-                                device=job.train.device, progress=progress)
+                                device=job.train.device, progress=progress, align=align)
         scored = (probs, labels, time.perf_counter() - t0)
+        transfer.update({"alignment": align.to_dict()} if align else {})
     probs, labels, test_seconds = scored
     calibration, cal, fitted_on = {}, None, f"{job.train_on} val"
     if job.train.calibration == "cross_real":  # on the other real set's scores, never on this test set
@@ -277,6 +288,7 @@ def finish_job(job: TrainJob, result: FitResult, d: JobData, out_dir: str | Path
         "train_seconds": result.train_seconds, "test_seconds": test_seconds,
         "device": device_name(job.train.device),
         **calibration,  # only with a calibration: the reference recipe's metrics.json is unchanged
+        **transfer,  # only with a transfer option (docs/transfer.md)
         **(extra or {}),
     }
     save_scores(out_dir / "scores.npz", Scores(probs, labels, *test.central_frames()))

@@ -43,7 +43,7 @@ from palpation.graph.edges import ClipTopology
 from palpation.graph.features import clip_features
 from palpation.model.batch_workers import SeedFeed, step_shapes
 from palpation.model.config import ModelConfig, TrainConfig
-from palpation.model.evaluate import central_slice
+from palpation.model.evaluate import aligned_features, central_slice
 from palpation.model.stgnn import STGNN
 from palpation.model.train import (FitResult, epoch_row, focal_loss, grouped_parameters, norm_stats,
                                    seed_everything, training_batch)
@@ -315,16 +315,17 @@ def _validate(s: SeedState, i: int, epoch: int, losses: list, step: int, stack: 
 
 
 def predict_seeds(models: list[STGNN], stats: list, clips: ClipSet, rest: np.ndarray, topo: ClipTopology,
-                  batch_size: int, device: str = "cpu", progress: bool = False) -> list[tuple[np.ndarray, np.ndarray]]:
+                  batch_size: int, device: str = "cpu", progress: bool = False,
+                  align=None) -> list[tuple[np.ndarray, np.ndarray]]:
     """`evaluate.predict` of every seed's model on the same clips, all seeds in one vmapped forward per
-    batch; per seed (probs, labels)."""
-    return score_stack(Stack(models), stats, clips, rest, topo, batch_size, None, device, progress)
+    batch; per seed (probs, labels). `align`: as `evaluate.predict`'s."""
+    return score_stack(Stack(models), stats, clips, rest, topo, batch_size, None, device, progress, align=align)
 
 
 @torch.no_grad()
 def score_stack(stack: Stack, stats: list, clips: ClipSet, rest: np.ndarray, topo: ClipTopology, batch_size: int,
                 max_batches: int | None = None, device: str = "cpu", progress: bool = False,
-                cache: dict | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+                cache: dict | None = None, align=None) -> list[tuple[np.ndarray, np.ndarray]]:
     """Central-frame scores of the stacked models (eval mode) as `predict` gives them one model at a time;
     the clip features are computed once, each seed normalises them with its own statistics.
 
@@ -343,7 +344,8 @@ def score_stack(stack: Stack, stats: list, clips: ClipSet, rest: np.ndarray, top
             batches, lab, _ = cache[start]
         else:
             markers, lab = clips.gather(idx)
-            feats = clip_features(markers, rest, topo, stats[0].remove_common_motion)
+            feats = clip_features(markers, rest, topo, stats[0].remove_common_motion) if align is None \
+                else aligned_features(align, clips, idx, markers, rest, topo, stats[0].remove_common_motion)
             batches = [make_batch(markers, lab, rest, topo, st, device, features=feats) for st in stats]
             if cache is not None:  # each entry keeps its size: the total is a sum of ints, not of tensors
                 size = _bytes(batches)

@@ -1,0 +1,115 @@
+"""The transfer table (docs/results/transfer.csv): per configuration, method and selection rule, the scored set's
+metrics over seeds and whether the rule chose the method (docs/transfer.md).
+
+Rows come only from run records (palpation.transfer.selection.Run): nothing is written without every listed seed's
+run. `chosen` is true on one row per (config, selection, transductive): inductive and transductive methods are
+chosen apart, as they are reported apart. Beside the CSV, a JSON gives each row's selection score and the data it
+was computed on.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from palpation.config_ranges import Choice, ListOf, Text
+from palpation.io import csv_text, save_json, save_text
+from palpation.metrics.calibration import positive_share
+from palpation.metrics.classification import marker_metrics
+from palpation.metrics.scores import Scores
+from palpation.readers import read_yaml
+from palpation.transfer.selection import SELECTIONS, Run, choose, crossfit_by_trials, read_run, selection_score
+
+COLUMNS = ("config", "method", "selection", "transductive", "chosen", "seeds", "ap_mean", "ap_std", "auroc_mean",
+           "pos_share_05")
+METHOD_KEYS = {"about": Text(), "transductive": Choice(True, False), "overrides": ListOf(Text(), 0)}
+
+
+def read_methods(path: str | Path) -> dict[str, dict]:
+    """conf/transfer/methods.yaml: `methods: {name: {about, transductive, overrides}}`; unknown keys refused."""
+    fix = f"edit {path} (docs/transfer.md: a method is about, transductive, overrides)"
+    data = read_yaml(path, fix, "transfer methods")
+    methods = data.get("methods") if set(data) == {"methods"} else None
+    if not isinstance(methods, dict) or not methods:
+        raise ValueError(f"{path}: one top-level key `methods`, a non-empty mapping of method names; {fix}")
+    for name, spec in methods.items():
+        if not isinstance(spec, dict) or set(spec) != set(METHOD_KEYS):
+            raise ValueError(f"{path}: method {name!r} needs exactly the keys {sorted(METHOD_KEYS)}; {fix}")
+        for key, rule in METHOD_KEYS.items():
+            if rule.problem(spec[key]):
+                raise ValueError(f"{path}: methods.{name}.{key}={spec[key]!r}: need {rule.describe()}; {fix}")
+    return methods
+
+
+def is_transductive(method: str, spec: dict, runs: list[Run]) -> bool:
+    """The declared flag, checked against the runs: an alignment on the scored set's own clips is transductive."""
+    used = any(r.metrics.get("alignment", {}).get("transductive", False) for r in runs)
+    if used and not spec["transductive"]:
+        raise ValueError(f"method {method}: its runs align on the scored set's own clips ({runs[0].path}); declare "
+                         "it transductive: true")
+    return bool(spec["transductive"])
+
+
+def summary(scores: list[tuple[np.ndarray, np.ndarray]]) -> dict:
+    """Mean / sample std of AP, mean AUROC and mean share of markers at >= 0.5 over seeds' (probs, labels)."""
+    m = [marker_metrics(p, lab) for p, lab in scores]
+    ap = np.array([x["ap"] for x in m])
+    return {"seeds": len(scores), "ap_mean": float(ap.mean()), "ap_std": float(ap.std(ddof=1)) if len(ap) > 1 else 0.0,
+            "auroc_mean": float(np.mean([x["auroc"] for x in m])),
+            "pos_share_05": float(np.mean([positive_share(p) for p, _ in scores]))}
+
+
+def _scored(runs: list[Run]) -> list[Scores]:
+    return [r.scores() for r in runs]
+
+
+def table(root: str | Path, methods: dict[str, dict], configs: list[str], seeds: list[int], clip_len: int,
+          crossfit: dict[str, int] | None = None) -> list[dict]:
+    """The rows (COLUMNS plus `selection_score` and `chosen_on`, the JSON's details). `crossfit`: configurations whose cross_real choice is cross-fitted by trials on the
+    scored set itself (n folds), for a set that must both choose and be scored."""
+    crossfit = crossfit or {}
+    runs = {(m, c): [read_run(root, m, c, clip_len, s) for s in seeds] for m in methods for c in configs}
+    by_method = {m: [r for c in configs for r in runs[(m, c)]] for m in methods}
+    rows = []
+    for config in configs:
+        scored = {m: _scored(runs[(m, config)]) for m in methods}
+        flag = {m: is_transductive(m, methods[m], runs[(m, config)]) for m in methods}
+        base = {m: summary([(s.probs, s.labels) for s in scored[m]]) for m in methods}
+        for selection in SELECTIONS:
+            if selection == "cross_real" and config in crossfit:
+                rows += _crossfit_rows(config, methods, scored, flag, base, crossfit[config])
+                continue
+            score = {m: [selection_score(r, selection, by_method[m]) for r in runs[(m, config)]] for m in methods}
+            if all(any(v is None for v in vals) for vals in score.values()):
+                continue  # the rule scores no method here (sim_val of a Meat-trained configuration)
+            means = {m: None if any(v is None for v in vals) else [v[0] for v in vals] for m, vals in score.items()}
+            picked = {t: choose({m: means[m] for m in methods if flag[m] == t}) for t in (False, True)}
+            for m in methods:
+                rows.append({"config": config, "method": m, "selection": selection, "transductive": flag[m],
+                             "chosen": picked[flag[m]] == m, **base[m],
+                             "selection_score": None if means[m] is None else float(np.mean(means[m])),
+                             "chosen_on": sorted({v[1] for v in score[m] if v is not None})})
+    return rows
+
+
+def _crossfit_rows(config, methods, scored, flag, base, n_folds) -> list[dict]:
+    rows = [{"config": config, "method": m, "selection": "cross_real", "transductive": flag[m], "chosen": False,
+             **base[m], "selection_score": None, "chosen_on": []} for m in methods]
+    for t in (False, True):
+        group = {m: scored[m] for m in methods if flag[m] == t}
+        if not group:
+            continue
+        fit = crossfit_by_trials(group, n_folds)
+        rows.append({"config": config, "method": "crossfit(" + "|".join(fit["choices"]) + ")",
+                     "selection": "cross_real", "transductive": t, "chosen": True, **summary(fit["scores"]),
+                     "selection_score": None, "chosen_on": [f"{config} trials {f} (other folds)" for f in fit["folds"]]})
+    return rows
+
+
+def write_table(rows: list[dict], out_csv: str | Path) -> None:
+    """The CSV (COLUMNS, 4 decimals) and `<stem>.json` beside it with every row's selection details."""
+    out_csv = Path(out_csv)
+    shown = [{**r, "transductive": str(r["transductive"]).lower(), "chosen": str(r["chosen"]).lower()} for r in rows]
+    save_text(out_csv, csv_text(shown, COLUMNS, 4))
+    save_json(out_csv.with_suffix(".json"), {"columns": list(COLUMNS), "rows": rows})

@@ -1,0 +1,69 @@
+"""The latent press depth of a slide recovered by the twin-made lookup (palpation.transfer.latent), and the Sim set's
+depth options of palpation.apps.simulate (set=depth_bank, dataset.depths_from)."""
+
+import numpy as np
+import pytest
+from omegaconf import OmegaConf
+
+from palpation.apps.simulate import set_depths, trajectory_set
+from palpation.graph.layout import rest_layout
+from palpation.io import csv_text, save_text
+from palpation.transfer.latent import DepthLookup, draw_depths, read_estimates, slide_signature
+
+REST = rest_layout("ideal").astype(np.float64)
+
+
+def toy_slide(depth_mm, rng, n_frames=20, drift_px=30.0):
+    """A stand-in for a twin slide: the press spreads the markers radially (more with depth, most near the centre
+    of the dome) and squeezes the field anisotropically as the tip slides; the whole field drifts along the slide
+    (what every real trial does differently) and the detector adds noise."""
+    c = REST.mean(0)
+    r = REST - c
+    rad = np.linalg.norm(r, axis=1, keepdims=True) / np.linalg.norm(r, axis=1).max()
+    spread = 0.9 * depth_mm * r / max(np.linalg.norm(r, axis=1).max(), 1) * 8 * np.exp(-rad ** 2)
+    t = np.linspace(0, 1, n_frames)[:, None, None]
+    shear = 0.02 * depth_mm * np.sin(2 * np.pi * t) * r[None, :, ::-1]
+    drift = drift_px * np.concatenate([t, -0.5 * t], -1)
+    return REST + spread + shear + drift + rng.normal(0, 0.3, (n_frames, *REST.shape))
+
+
+def test_signature_ignores_the_whole_field_drift():
+    rng = np.random.default_rng(0)
+    a = slide_signature(toy_slide(3.0, np.random.default_rng(1), drift_px=0.0), REST)
+    b = slide_signature(toy_slide(3.0, np.random.default_rng(1), drift_px=80.0), REST)
+    np.testing.assert_allclose(a, b, atol=1e-9)
+    assert slide_signature(toy_slide(5.0, rng), REST)[0] > a[0] > slide_signature(toy_slide(1.0, rng), REST)[0] > 0
+
+
+def test_depth_of_a_slide_recovered_from_a_bank_at_known_depths():
+    rng = np.random.default_rng(4)
+    bank = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
+    lookup = DepthLookup.fit(np.array([slide_signature(toy_slide(d, rng), REST) for d in bank]), np.array(bank))
+    assert lookup.loo_rmse_mm < 0.15 and lookup.n_bank == 6
+    for depth, drift in ((2.7, 55.0), (4.4, -20.0)):  # unseen depths, another drift and noise
+        est = lookup.estimate(slide_signature(toy_slide(depth, rng, n_frames=16, drift_px=drift), REST))[0]
+        assert abs(est - depth) < 0.15, (depth, est)
+    with pytest.raises(ValueError, match="at 2 or more depths"):
+        DepthLookup.fit(np.ones((5, 2)), np.full(5, 3.0))
+
+
+def test_sim_depths_drawn_over_the_estimates_leave_the_other_draws_alone(tmp_path):
+    path = tmp_path / "latent_depth.csv"
+    save_text(path, csv_text([{"set": "meat", "trial": f"t{i}", "depth_mm": d} for i, d in
+                              enumerate([1.5, 2.5, 4.0])], ("set", "trial", "depth_mm"), 4))
+    est = read_estimates(path)
+    depths = draw_depths(est, 40, seed=42)
+    assert set(depths) <= set(est) and len(set(depths)) == 3 and np.array_equal(depths, draw_depths(est, 40, 42))
+    cfg = OmegaConf.create({"set": "randomised", "n_pairs": 4, "seed": 42, "dataset": {"depths_from": str(path)}})
+    plain = trajectory_set("randomised", 42, 4)
+    spread = trajectory_set("randomised", 42, 4, depths_mm=set_depths(cfg))
+    assert [r.depth_mm for r in plain] == [None] * 8
+    assert [r.depth_mm for r in spread][::2] == [r.depth_mm for r in spread][1::2] == list(draw_depths(est, 4, 42))
+    strip = lambda r: (r.heading_offset_deg, r.twin, r.vessel, r.name)  # noqa: E731
+    assert [strip(r) for r in plain] == [strip(r) for r in spread]  # heading, k_n, c_n: the same draws
+    assert set_depths(OmegaConf.create({"set": "randomised", "dataset": {"depths_from": None}})) is None
+    bank = trajectory_set("depth_bank", 0, depths_mm=[1.0, 3.0])
+    assert [(r.depth_mm, r.vessel, r.kind) for r in bank] == [(1.0, False, "slide"), (3.0, False, "slide")]
+    save_text(path, "set,trial,depth_mm\nmeat,t0,12.0\n")
+    with pytest.raises(ValueError, match="depth_mm in"):
+        read_estimates(path)
