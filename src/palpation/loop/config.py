@@ -12,6 +12,7 @@ from palpation.loop.effects import EFFECTS, PARAMS, check_effects
 from palpation.loop.generative_config import GenerativeConfig
 from palpation.loop.inputs import TWIST_Z_ANGLES
 from palpation.loop.method import Method
+from palpation.loop.selftest_config import SelftestConfig, parse_case
 
 SAMPLERS = ("gp", "tpe", "random")
 
@@ -34,31 +35,6 @@ class SearchSettings:
     # processes that make the Optuna proposals of all problems' studies in parallel (1 = in this process).
     # A GP proposal costs ~0.5 s of CPU: with 60 self-test problems on a GPU they, not the twin, set the pace
     ask_workers: int = ranged(1, Int(ge=1))
-
-
-@dataclass
-class SelftestConfig:
-    """Measured-like sets made by the twin with hidden effects on, then the loop on each (loop.selftest).
-
-    Size = len(cases) x runs_per_case. A case is '+'-joined effects; `unlisted:<name>` is one outside the
-    candidate list (loop.selftest.UNLISTED)."""
-
-    cases: list[str] = ranged(rule=ListOf(Text()), factory=lambda: [
-        "surface_contact", "camera", "viscous", "layered", "marker_anchor",  # singles
-        "surface_contact+friction",  # a dependent pair (friction acts only through contact)
-        "surface_contact+mount", "surface_contact+camera", "camera+layered", "viscous+marker_anchor",  # pairs
-        "unlisted:image_distortion", "unlisted:marker_defect"])  # outside the list
-    runs_per_case: int = ranged(1, Int(ge=1))
-    strength_low: float = ranged(1.0, Num(gt=0))  # injected strength in nominal steps, drawn uniformly in [low, high]
-    strength_high: float = ranged(2.5, Num(gt=0))
-    noise_px: float = ranged(0.2, Num(ge=0))  # std per coordinate (SPEC §13.2: photo noise < 0.2 px)
-    # on in the starting twin (none: as the real mode)
-    base_effects: list[str] = ranged(rule=ListOf(Choice(*EFFECTS), 0, unique=True), factory=list)
-    base_params: dict[str, float] = ranged(rule=DictOf(Num()), factory=lambda: {"E": 1.2225e6})
-    states: list[str] = ranged(rule=ListOf(Text(), unique=True), factory=lambda: ["press", "twist_z", "twist_x"])
-    holdout: list[str] = ranged(rule=ListOf(Text(), 0, unique=True), factory=lambda: ["twist_z"])
-    max_rounds: int = ranged(1, Int(ge=1))
-    seed: int = ranged(0, SEED)
 
 
 @dataclass
@@ -88,7 +64,6 @@ class LoopConfig:
 
     def validate(self) -> "LoopConfig":
         check_effects(self.effects, "loop.effects")
-        from palpation.loop.selftest import parse_case
         for case in self.selftest.cases:
             parse_case(case, self.selftest.base_effects)
         check_effects(self.selftest.base_effects, "loop.selftest.base_effects")

@@ -27,10 +27,12 @@ import numpy as np
 from palpation.io import csv_text
 from palpation.loop.config import LoopConfig
 from palpation.loop.effects import EFFECTS, PARAMS, move
-from palpation.loop.engine import Problem, evaluate, initial_params, run_rounds
+from palpation.loop.engine import run_rounds
 from palpation.loop.inputs import Target
 from palpation.loop.parsimony import added_effects
+from palpation.loop.problem import Problem, evaluate, initial_params
 from palpation.loop.real import make_problem
+from palpation.loop.selftest_config import parse_case
 from palpation.loop.unexplained import check_all, noise_estimate
 from palpation.loop.unlisted import UNLISTED, UNLISTED_PREFIX
 from palpation.measured import MeasuredState, load_measured_set, make_measured_set, save_measured_set
@@ -65,23 +67,6 @@ class Injection:
     @property
     def name(self) -> str:
         return self.tag or f"run{self.run:03d}"
-
-
-def parse_case(case: str, base_effects, where: str = "loop.selftest.cases") -> tuple[list[str], list[str]]:
-    """'surface_contact+friction' -> (['surface_contact', 'friction'], []); 'unlisted:x' -> ([], ['x'])."""
-    parts = [c.strip() for c in str(case).split("+") if c.strip()]
-    inl = [c for c in parts if not c.startswith(UNLISTED_PREFIX)]
-    unl = [c[len(UNLISTED_PREFIX):] for c in parts if c.startswith(UNLISTED_PREFIX)]
-    bad = [c for c in inl if c not in EFFECTS] + [UNLISTED_PREFIX + u for u in unl if u not in UNLISTED]
-    if bad or not parts:
-        raise ValueError(f"{where}: case '{case}' names unknown effect(s) {bad}; known: {sorted(EFFECTS)} and "
-                         f"{[UNLISTED_PREFIX + u for u in UNLISTED]}, joined with '+'")
-    for e in inl:
-        missing = [r for r in EFFECTS[e].requires if r not in inl and r not in base_effects]
-        if missing:
-            raise ValueError(f"{where}: case '{case}': {e} acts only through {missing}; inject them together "
-                             f"('{'+'.join([*missing, e])}') or add them to loop.selftest.base_effects")
-    return inl, unl
 
 
 def base_for(effects, cfg: LoopConfig, base: Mapping[str, float]) -> tuple[list[str], dict[str, float]]:
