@@ -40,7 +40,7 @@ def aim_checks(df: pd.DataFrame) -> list[tuple[str, str, float, str, float, floa
 
 def slide_loop_rounds(rounds: pd.DataFrame) -> tuple[str, list[str]]:
     """The slide loop's table (per fold and round) and one bullet per fold: held-out MAE first -> last round."""
-    gated = "mae_inner_cv_px" in rounds  # the inner gate's columns (loop.slide_loop COLUMNS), absent in older runs
+    gated = "mae_inner_cv_px" in rounds  # the inner gate's columns (slides.loop COLUMNS), absent in older runs
     rows = [[r["fold"], int(r["round"]), r["effect_added"], num(r["mae_fit_px"], 3), num(r["mae_heldout_px"], 3),
              f"{num(r['vessel_ratio_sim'], 2)} / {num(r['vessel_ratio_real'], 2)}"]
             + ([num(r["mae_inner_cv_px"], 3), num(r["gate_p"], 3)] if gated else []) for _, r in rounds.iterrows()]
@@ -62,7 +62,7 @@ def slide_loop_rounds(rounds: pd.DataFrame) -> tuple[str, list[str]]:
 
 
 def reachable(df: pd.DataFrame, bounds: pd.DataFrame) -> list[str]:
-    """The slide-loop aim read against drift_bounds.csv (loop.slide_diagnosis): the held-out MAE it asks for, what
+    """The slide-loop aim read against drift_bounds.csv (slides.diagnosis): the held-out MAE it asks for, what
     predictors without a twin reach, and the bounds that know each held-out trial's own motion."""
     by = df.set_index("twin")["heldout_slide_mae_px"].astype(float)
     if "calibrated" not in by.index or not len(bounds):

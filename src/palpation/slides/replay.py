@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from palpation.loop.residual import MODES, decompose
 from palpation.measured_sequences import SequenceSet
 from palpation.twin.config import TwinConfig
 from palpation.twin.markers import MarkerBinding, project_markers_np
@@ -158,7 +159,7 @@ def split_params(params: dict) -> tuple[dict, dict]:
     if unknown:
         raise ValueError(f"slide loop: unknown parameter(s) {unknown}; use per-env twin parameters "
                          f"{sorted(env_names)} or {list(SCHEDULE_KEYS)} (palpation.twin.parameters, "
-                         "loop.slides.SCENE_PARAMETERS)")
+                         "slides.replay.SCENE_PARAMETERS)")
     env = {env_names[k]: float(v) for k, v in params.items() if k in env_names}
     return env, {k: float(v) for k, v in params.items() if k in SCHEDULE_KEYS}
 
@@ -260,8 +261,6 @@ def vessel_ratio(markers: np.ndarray, labels: np.ndarray | None) -> float:
 def slide_modes(sim: np.ndarray, sset: SequenceSet) -> dict:
     """The residual of every frame split into the photo loop's modes (loop.residual), averaged over the
     frames of `sset`, plus the MAE over the vessel-labelled markers and off them (the detector's split)."""
-    from palpation.loop.residual import MODES, decompose
-
     rows = [decompose(sim[t, f], sset.markers[t, f]).row() for t in range(sset.n_trials) for f in range(sset.n_frames)]
     out = {f"share_{m}": float(np.mean([r[f"share_{m}"] for r in rows])) for m in MODES}
     for key in ("rotation_deg", "scale_pct", "stretch_pct"):

@@ -4,9 +4,9 @@ it scores that trial better than the current twin (paired test over the fold's t
 import numpy as np
 import pytest
 
-from palpation.loop.slide_gate import GateSettings, inner_splits, paired_p, verdict
-from palpation.loop.slide_loop import SearchSettings, SlideLoopSettings, run_slide_loop
-from palpation.loop.slides import motion
+from palpation.slides.gate import GateSettings, inner_splits, paired_p, verdict
+from palpation.slides.loop import SearchSettings, SlideLoopSettings, run_slide_loop
+from palpation.slides.replay import motion
 
 from tests.loop.test_slides import toy_set
 
