@@ -6,7 +6,7 @@ import pytest
 from palpation.loop.config import LoopConfig, SelftestConfig
 from palpation.loop.inputs import load_targets
 from palpation.loop.problem import initial_params
-from palpation.loop.selftest import draw_injections, make_sets, remake_set, simulate_injections
+from palpation.loop.selftest.fixed import draw_injections, make_sets, remake_set, simulate_injections
 from palpation.markers.template import rest_template
 from palpation.measured import load_measured_set, make_measured_set
 from tests.loop.test_selftest import STATES

@@ -57,7 +57,7 @@ class LoopConfig:
     shell_thickness_mm: float = ranged(1.5, Num(gt=0))  # layered skin (SPEC gives no two-material values; a choice)
     search: SearchSettings = field(default_factory=SearchSettings)
     selftest: SelftestConfig = field(default_factory=SelftestConfig)
-    generative: GenerativeConfig = field(default_factory=GenerativeConfig)  # drawn truths (loop.generative)
+    generative: GenerativeConfig = field(default_factory=GenerativeConfig)  # drawn truths (loop.selftest.generative)
     method: Method = field(default_factory=Method)  # the mechanisms: one loop for every profile (loop.method)
     split_by_kind: str = "auto"  # one twin batch per kind: auto (= on the CPU), true, false
     max_frames: Optional[int] = ranged(None, Int(ge=1, null=True))  # cut every trajectory (smoke tests only)

@@ -1,7 +1,7 @@
 """Settings of the fixed self-test (`loop.selftest`, Hydra node of LoopConfig) and its case strings.
 
 A case is '+'-joined effects of the candidate list (loop.effects) or outside it (`unlisted:<name>`, loop.unlisted);
-`parse_case` reads and checks one. The self-test itself runs in loop.selftest.
+`parse_case` reads and checks one. The self-test itself runs in loop.selftest.fixed.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from palpation.loop.unlisted import UNLISTED, UNLISTED_PREFIX
 
 @dataclass
 class SelftestConfig:
-    """Measured-like sets made by the twin with hidden effects on, then the loop on each (loop.selftest).
+    """Measured-like sets made by the twin with hidden effects on, then the loop on each (loop.selftest.fixed).
 
     Size = len(cases) x runs_per_case. A case is '+'-joined effects; `unlisted:<name>` is one outside the
     candidate list (loop.unlisted.UNLISTED)."""

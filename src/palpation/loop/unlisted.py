@@ -2,7 +2,7 @@
 
 Each is a transform of one run's simulated markers, all states at once ((S, 127, 2) -> same), applied before
 the detector noise, with a strength in its own nominal steps and a default range for the generative draw
-(loop.generative). The candidates (loop.effects) are: E, surface contact (k_s), friction (k_t, mu), the camera
+(loop.selftest.generative). The candidates (loop.effects) are: E, surface contact (k_s), friction (k_t, mu), the camera
 (an image similarity S = c + sR(u - c) + d; as the twin applies it, markers = rest + sR(m - m_rest) through a
 re-binding, so it scales and rotates *displacements* isotropically and never moves the rest image), the mount
 (a rigid pose offset), viscous damping (alpha), a layered skin (a stiffer shell of uniform ratio) and
@@ -123,7 +123,7 @@ def _anisotropic(m, s, rng, rest):
     return rest + u @ scale.T
 
 
-# one library for both self-tests (loop.selftest cases `unlisted:<name>`, loop.generative draws)
+# one library for both self-tests (loop.selftest cases `unlisted:<name>`, loop.selftest.generative draws)
 UNLISTED: dict[str, Unlisted] = {u.name: u for u in (
     Unlisted("image_distortion", "optical", _distortion, (1.0, 2.5)),
     Unlisted("tangential_distortion", "optical", _tangential, (1.0, 2.5)),

@@ -1,4 +1,4 @@
-"""Self-test: measured-like sets made by the twin with hidden effects, then the loop on each, as in real use.
+"""The fixed self-test: measured-like sets made by the twin with hidden effects, then the loop on each, as in real use.
 
 Every run starts from the same twin as the real mode (no contact; `base_effects` on, none by default)
 and injects one *case*: a single effect, a dependent pair (friction with the surface contact it acts
@@ -11,7 +11,8 @@ takes a random unit direction). Detector-like Gaussian noise `noise_px` per coor
 is saved in the generic format and read back: the loop knows only the file. It must name the exact in-list
 set, and report `unexplained` exactly when an out-of-list effect is in the data (loop.unexplained).
 Every run of a batch advances in lockstep. Size: `cases` x `runs_per_case` (conf/loop/*.yaml).
-loop.generative draws its runs instead of taking them from the list, and shares everything after the draw.
+loop.selftest.generative draws its runs instead of taking them from the list, and shares everything after the draw
+(Injection, simulate_injections, make_sets, loop_on_sets, here).
 """
 
 from __future__ import annotations
@@ -53,9 +54,9 @@ class Injection:
     base_effects: list[str]
     params: dict[str, float]  # the twin that made the data
     redrawn: int = 0  # draws after the first (its twin diverged; simulate_injections)
-    # loop.generative: the run's name (problem, set file) and its own random stream, which makes its set (out-of-list
-    # draws, noise), so that a run is remade alone; the fixed self-test leaves both unset (one stream for all runs)
-    # and names runs by number
+    # loop.selftest.generative: the run's name (problem, set file) and its own random stream, which makes its set
+    # (out-of-list draws, noise), so that a run is remade alone; the fixed self-test leaves both unset (one stream for
+    # all runs) and names runs by number
     tag: str = ""
     rng: np.random.Generator | None = field(default=None, repr=False, compare=False)
     rest: np.ndarray | None = field(default=None, repr=False, compare=False)  # its twin's rest markers (unlisted)
@@ -132,7 +133,8 @@ def simulate_injections(injections: list[Injection], states: list[Target], simul
     """Every injected twin at `states` (one batch): markers (runs, states, 127, 2). Strong draws can leave the
     twin's stable range (viscous near its top strength diverges on four of seeds 3-7): such a run is redrawn up to
     MAX_REDRAWS times (injections is updated in place, the log says which), else the error stands.
-    `draw_again(inj, attempt)` draws a run anew (default: `redraw`, the fixed self-test's; loop.generative's own)."""
+    `draw_again(inj, attempt)` draws a run anew (default: `redraw`, the fixed self-test's; loop.selftest.generative's
+    own)."""
     draw_again = draw_again or (lambda inj, attempt: redraw(inj, cfg, base, attempt))
     n = len(states)
     markers, failed = simulate([(t.state, inj.params) for inj in injections for t in states])
