@@ -98,7 +98,7 @@ def test_fold_twin_option(tmp_path):
 
 def test_table_task_end_to_end(tmp_path):
     from palpation.apps.twin_judge import table
-    from tests.loop.test_slides import toy_set
+    from tests.slides.test_replay import toy_set
 
     rng = np.random.default_rng(2)
     sset = toy_set(4, 3)

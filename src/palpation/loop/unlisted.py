@@ -36,8 +36,8 @@ px the cap binds, and a stiffening is then a weak effect (the summary gives the 
 Strength ranges start where an image similarity fitted to the change leaves ~3x the 0.2 px noise (the test's
 known answer, on a contact-sized press). Whether the loop
 also cannot *absorb* them through its fit is what the self-test measures (outside runs: `unexplained`, and no
-physical effect named beyond the in-list truth); tests/loop/test_generative.py checks that no image similarity
-absorbs any of them.
+physical effect named beyond the in-list truth); tests/loop/selftest/test_generative.py checks that no image
+similarity absorbs any of them.
 """
 
 from __future__ import annotations

@@ -296,7 +296,7 @@ def run_slide_loop(evaluate: Evaluate, sset: SequenceSet, settings: SlideLoopSet
                    workers: int = 1, batch_folds: bool = False) -> dict:
     """Both folds: rows (COLUMNS), per-fold parameters per round, and the folds' trial numbers. The folds share
     nothing, so `workers` 2 runs them in two spawned processes (`evaluate` must then pickle: apps.slide_loop's
-    Replayer) with the same result as one after the other (tests/loop/test_slides.py). `batch_folds`: the folds in
+    Replayer) with the same result as one after the other (tests/slides/test_replay.py). `batch_folds`: the folds in
     threads whose twin calls run as one batch (slides.fold_batches; `evaluate.many` runs them)."""
     folds = trial_folds(trial_numbers)
     jobs = [(evaluate, sset.subset(idx), sset.subset(folds[other(fold)]), settings, fold) for fold, idx in folds.items()]

@@ -36,7 +36,8 @@ from palpation.loop.config import LoopConfig
 from palpation.loop.effects import EFFECTS
 from palpation.loop.generative_config import SPLITS, TEST_SEED_START
 from palpation.loop.inputs import Target
-from palpation.loop.selftest.fixed import Injection, base_for, loop_on_sets, make_sets, simulate_injections, switch_on
+from palpation.loop.selftest.fixed import (Injection, base_for, loop_on_sets, make_sets, simulate_injections,
+                                           switch_on)
 from palpation.measured import MeasuredState
 
 log = logging.getLogger(__name__)
