@@ -12,7 +12,7 @@ import palpation.loop.config  # noqa: F401  (registers base_loop)
 import palpation.twin.config  # noqa: F401  (registers base_twin)
 from palpation.apps import loop as app
 from palpation.loop.report import REAL_COLUMNS
-from palpation.loop.selftest import COLUMNS as SELFTEST_COLUMNS
+from palpation.loop.selftest.fixed import COLUMNS as SELFTEST_COLUMNS
 from palpation.markers.template import rest_template
 from palpation.measured import MeasuredState, make_measured_set, save_measured_set
 from palpation.paths import REPO_ROOT

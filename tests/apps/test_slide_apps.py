@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 
-from palpation.apps.slide_loop import select
 from palpation.config_check import check_config
 from palpation.measured_sequences import make_sequence_set
 from palpation.paths import REPO_ROOT
+from palpation.slides.selection import select
 
 
 @pytest.mark.parametrize("app", ["silicone_sequences", "slide_loop", "twin_judge"])

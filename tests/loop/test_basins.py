@@ -6,9 +6,9 @@ from scipy.spatial import cKDTree
 
 from palpation.loop.basins import CAM, camera_starts, nominal_steps, procrustes
 from palpation.loop.config import LoopConfig
-from palpation.loop.method import Method
-from palpation.loop.engine import Problem, initial_params
 from palpation.loop.inputs import Target
+from palpation.loop.method import Method
+from palpation.loop.problem import Problem, initial_params
 from palpation.loop.refit import finish
 from palpation.loop.simulate import State
 from palpation.markers.template import rest_template

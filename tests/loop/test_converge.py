@@ -6,9 +6,10 @@ import pytest
 
 import palpation.loop.engine as engine
 from palpation.loop.config import LoopConfig, SearchSettings
-from palpation.loop.method import Method
-from palpation.loop.engine import Problem, evaluate, initial_params, run_rounds
+from palpation.loop.engine import run_rounds
 from palpation.loop.inputs import Target
+from palpation.loop.method import Method
+from palpation.loop.problem import Problem, evaluate, initial_params
 from palpation.loop.refit import converge, finish, subset_starts
 from palpation.loop.simulate import State
 from palpation.markers.template import rest_template

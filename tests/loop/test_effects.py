@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from palpation.loop.effects import EFFECTS, PARAMS, clip, defaults, move, split, twin_overrides
-from palpation.loop.engine import initial_params
+from palpation.loop.problem import initial_params
 
 
 def test_every_effect_names_known_parameters_and_steps():

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from palpation.loop.engine import Problem, evaluate
 from palpation.loop.inputs import Target
+from palpation.loop.problem import Problem, evaluate
 from palpation.loop.simulate import State
 
 

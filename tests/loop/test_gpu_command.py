@@ -41,7 +41,7 @@ def test_profiles_differ_only_in_size():
 
 
 def test_loop_app_imports_without_gmsh():
-    code = ("import sys; sys.modules['gmsh'] = None; import palpation.apps.loop, palpation.loop.selftest; "
+    code = ("import sys; sys.modules['gmsh'] = None; import palpation.apps.loop, palpation.loop.selftest.fixed; "
             "from palpation.twin.mesh import SensorMesh; print('ok')")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]

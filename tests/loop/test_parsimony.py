@@ -4,9 +4,9 @@ effect can take over, and one the data need."""
 import numpy as np
 
 from palpation.loop.effects import EFFECTS
-from palpation.loop.engine import Problem, evaluate, initial_params
 from palpation.loop.inputs import Target
 from palpation.loop.parsimony import added_effects, prune, removal_set
+from palpation.loop.problem import Problem, evaluate, initial_params
 from palpation.loop.simulate import State
 from palpation.markers.template import rest_template
 

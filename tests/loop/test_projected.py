@@ -4,12 +4,13 @@ extra effect whose try reached the old set's optimum is not credited with it. To
 import numpy as np
 import pytest
 
-from palpation.loop.config import LoopConfig, SearchSettings
-from palpation.loop.method import Method
-from palpation.loop.engine import Problem, evaluate, initial_params, run_rounds
-from palpation.loop.inputs import Target
 from palpation.loop.compete import Winner
+from palpation.loop.config import LoopConfig, SearchSettings
+from palpation.loop.engine import run_rounds
 from palpation.loop.gate import decide, heldout_z
+from palpation.loop.inputs import Target
+from palpation.loop.method import Method
+from palpation.loop.problem import Problem, evaluate, initial_params
 from palpation.loop.projected import projected, recheck
 from palpation.loop.simulate import State
 from palpation.markers.template import rest_template

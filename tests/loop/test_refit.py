@@ -5,11 +5,12 @@ import numpy as np
 import pytest
 
 from palpation.loop.config import LoopConfig, SearchSettings
-from palpation.loop.method import Method
 from palpation.loop.effects import PARAMS
-from palpation.loop.engine import Problem, evaluate, initial_params, run_rounds
+from palpation.loop.engine import run_rounds
 from palpation.loop.inputs import Target
+from palpation.loop.method import Method
 from palpation.loop.polish import lm_steps, polish
+from palpation.loop.problem import Problem, evaluate, initial_params
 from palpation.loop.refit import converge
 from palpation.loop.simulate import State
 from palpation.markers.template import rest_template

@@ -6,9 +6,9 @@ import pytest
 
 from palpation.loop.basins import CAM
 from palpation.loop.config import LoopConfig
-from palpation.loop.method import Method
-from palpation.loop.engine import Problem, initial_params
 from palpation.loop.inputs import Target
+from palpation.loop.method import Method
+from palpation.loop.problem import Problem, initial_params
 from palpation.loop.refit import converge
 from palpation.loop.simulate import State
 from tests.loop.test_basins import AMP, CENTRE, NODES, REST, ROUGH, TREE, TRUTH_ROT

@@ -4,10 +4,10 @@
 import numpy as np
 import pytest
 
-from palpation.loop.engine import Problem, evaluate, initial_params
 from palpation.loop.inputs import Target
 from palpation.loop.method import Method
 from palpation.loop.parsimony import added_effects, prune
+from palpation.loop.problem import Problem, evaluate, initial_params
 from palpation.loop.refit import converge, stiffness_starts
 from palpation.loop.simulate import State
 from palpation.markers.template import rest_template

@@ -9,11 +9,11 @@ from omegaconf import OmegaConf
 from sklearn.metrics import average_precision_score
 
 from palpation.io import save_json, save_text
-from palpation.loop.slide_twins import heldout_trials, twin_overrides, write_fold_twin
 from palpation.measured_sequences import save_sequence_set
 from palpation.metrics.scores import Scores, save_scores
 from palpation.report.runs import run_dir
 from palpation.report.twin_selection import COLUMNS, Candidate, Member, crossfit, selection_table
+from palpation.slides.twins import heldout_trials, twin_overrides, write_fold_twin
 
 TRIALS = [1, 2, 3, 4]
 
@@ -98,7 +98,7 @@ def test_fold_twin_option(tmp_path):
 
 def test_table_task_end_to_end(tmp_path):
     from palpation.apps.twin_judge import table
-    from tests.loop.test_slides import toy_set
+    from tests.slides.test_replay import toy_set
 
     rng = np.random.default_rng(2)
     sset = toy_set(4, 3)
@@ -131,7 +131,7 @@ def test_table_task_end_to_end(tmp_path):
     assert df.loc[df["twin"] == "slide_loop", "heldout_slide_mae_px"].item() == pytest.approx(2.25)
     assert df.loc[1, "p_vs_simpler"] == pytest.approx(1 / 16) and df.loc[0, "why"].startswith("chosen: simplest")
     assert (tmp_path / "out" / "fig.png").exists() and (tmp_path / "out" / "fig.pdf").exists()
-    bounds = pd.read_csv(tmp_path / "out" / "b.csv")  # on the replays' trials and frames (loop.slide_diagnosis)
+    bounds = pd.read_csv(tmp_path / "out" / "b.csv")  # on the replays' trials and frames (slides.diagnosis)
     assert list(bounds["predictor"])[0] == "no_motion" and bounds["change_vs_no_motion"].iloc[0] == 0
     # rule twin_choice (the main Sim set's twin) decides from the same replays by the same function: the same twin,
     # and the table refuses a choice.json that names another (stale replays on one side)

@@ -91,7 +91,7 @@ rule loop_selftest:
         LOOP_SHELL
 
 
-# The generative self-test (loop.generative): each run draws its truth (0-3 in-list effects, strengths, E, k_s, a
+# The generative self-test (loop.selftest.generative): each run draws its truth (0-3 in-list effects, strengths, E, k_s, a
 # share with an outside effect). Split `dev` (seeds < 1000) while choosing mechanisms and thresholds; `test` once, at
 # the end. Finished runs are kept in general/{split}/generative/runs/ (deliberately not outputs, as the studies: a
 # killed run resumes there). Not in `rule all`: snakemake results/loop/general/dev/loop_selftest_general.csv

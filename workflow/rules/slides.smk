@@ -1,4 +1,4 @@
-# Issue 12: the residual loop on the real Silicone slides (docs/loop.md "Slides"). The sequence set comes
+# Issue 12: the residual loop on the real Silicone slides (docs/slides.md). The sequence set comes
 # from rule silicone_sequences (silicone.smk); the twin of the scene is built inside the app.
 # Needs common.smk (PY, CONDA_ENV, hydra_dir, twin_mesh, TWIN_ARGS, GPU) and twin.smk (rule mesh).
 # In `all` only through the downstream judge (judge.smk; judge.seeds): the profile's judge.twin and

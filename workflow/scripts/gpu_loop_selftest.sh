@@ -11,7 +11,7 @@
 # resumes (the sets are re-made from the seed, the studies continue in OUTDIR/selftest/study.journal).
 # On the lent device (10 min per command; $OUT is emptied before each), until it exits 0:
 #   LIMIT_S=560 bash workflow/scripts/gpu_loop_selftest.sh results/loop_gpu; cp results/loop_gpu/*.{csv,md,json,log} $OUT/
-# MODE=generative: the generative self-test (loop.generative) at loop=PRESET sizes (default paper) instead, split
+# MODE=generative: the generative self-test (loop.selftest.generative) at loop=PRESET sizes (default paper) instead, split
 # SPLIT (dev, or test once at the end) with RUNS drawn runs per seed (default 60); finished runs are kept in
 # OUTDIR/generative/runs and skipped by the same command again. Writes OUTDIR/loop_selftest_general.csv and
 # selftest_general.{md,json}:

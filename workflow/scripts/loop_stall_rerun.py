@@ -23,11 +23,11 @@ from omegaconf import OmegaConf
 
 import palpation.apps.loop  # noqa: F401  (registers the loop's structured configs)
 from palpation.loop.effects import EFFECTS, PARAMS
-from palpation.loop.engine import evaluate
 from palpation.loop.inputs import load_targets
 from palpation.loop.polish import polish
+from palpation.loop.problem import evaluate
 from palpation.loop.real import make_problem
-from palpation.loop.selftest import base_for, remake_set
+from palpation.loop.selftest.fixed import base_for, remake_set
 from palpation.loop.simulate import LoopSimulator, loop_twin_config
 from palpation.loop.start import nominal_projection, start_twin
 from palpation.loop.unexplained import check_all, noise_estimate

@@ -28,17 +28,17 @@ from omegaconf import DictConfig, OmegaConf
 from palpation.calibration.objective import marker_mae_px
 from palpation.config_check import app_main
 from palpation.config_ranges import Choice
-from palpation.io import save_json, save_text
 from palpation.figures import loop as figures
+from palpation.io import save_json, save_text
 from palpation.loop import report
 from palpation.loop.config import LoopConfig
-from palpation.loop.generative import run_generative
-from palpation.loop.generative_report import write_outputs
 from palpation.loop.inputs import load_targets
 from palpation.loop.real import make_problem, run_loop, twin_key
 from palpation.loop.recalibrate import LOOP_STUDY
 from palpation.loop.residual import decompose, image_direction_deg
-from palpation.loop.selftest import confusion, rows_csv, run_selftest, summary
+from palpation.loop.selftest.fixed import confusion, rows_csv, run_selftest, summary
+from palpation.loop.selftest.generative import run_generative
+from palpation.loop.selftest.generative_report import write_outputs
 from palpation.loop.simulate import LoopSimulator, loop_twin_config
 from palpation.loop.start import nominal_projection, read_start, start_twin
 from palpation.loop.unlisted import twin_rest

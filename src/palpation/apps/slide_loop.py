@@ -1,7 +1,7 @@
-"""Hydra entry point: the residual loop on measured slides (issue 12; docs/loop.md "Slides").
+"""Hydra entry point: the residual loop on measured slides (issue 12; docs/slides.md).
 
-Reads a sequence set (`sequences`), keeps `trials` and `frames`, and runs loop.slide_loop with the twin
-of the real scene (loop.slides). Writes `out.csv` (one row per fold and round: fold, round, effect_added,
+Reads a sequence set (`sequences`), keeps `trials` and `frames`, and runs slides.loop with the twin
+of the real scene (slides.replay). Writes `out.csv` (one row per fold and round: fold, round, effect_added,
 mae_fit_px, mae_heldout_px, vessel_ratio_sim, vessel_ratio_real: the MAE of marker motion about each
 trial's median; then mae_abs_heldout_px: the absolute error, at_bounds, and the inner gate's mae_inner_cv_px and
 gate_p) and `out.json` (parameters per round, every gated try under `gate`).
@@ -20,16 +20,17 @@ from omegaconf import DictConfig, OmegaConf
 from palpation.config_check import app_main
 from palpation.config_ranges import SEED, Choice, DictOf, Int, ListOf, Num
 from palpation.io import csv_text, save_json, save_text
-from palpation.loop.slide_gate import TESTS, GateSettings
-from palpation.loop.slide_loop import COLUMNS, SAMPLERS, SearchSettings, SlideLoopSettings, run_slide_loop
-from palpation.loop.slides import frame_mae, frame_mae_abs, make_scene, replay_many
 from palpation.measured_sequences import SequenceSet, load_sequence_set
+from palpation.slides.gate import TESTS, GateSettings
+from palpation.slides.loop import COLUMNS, SAMPLERS, SearchSettings, SlideLoopSettings, run_slide_loop
+from palpation.slides.replay import frame_mae, frame_mae_abs, make_scene, replay_many
+from palpation.slides.selection import select
 from palpation.twin.config import TwinConfig
 from palpation.twin.markers import bind_markers
 from palpation.twin.mesh import SensorMesh, cached_sensor_mesh
 
 log = logging.getLogger(__name__)
-# checked before any work (config_ranges); the twin's settings are on TwinConfig. Both folds need a trial (loop.folds)
+# checked before any work (config_ranges); the twin's settings are on TwinConfig. Both folds need a trial (slides.folds)
 RANGES = {"trials": ListOf(Int(ge=1), 2, unique=True, null=True),
           "frames": ListOf(Int(ge=0), 2, 2, increasing=True, null=True),  # [first, end)
           "lead_in_mm": Num(ge=0), "base": DictOf(Num()), "search.sampler": Choice(*SAMPLERS),
@@ -38,24 +39,6 @@ RANGES = {"trials": ListOf(Int(ge=1), 2, unique=True, null=True),
           "gate.tries": Int(ge=1), "effects": DictOf(min_len=1), "effects.*": DictOf(min_len=1),
           "effects.*.*": ListOf(Num()), "max_rounds": Int(ge=0), "min_improvement_px": Num(ge=0),
           "fold_workers": Choice(1, 2)}
-
-
-def select(sset: SequenceSet, trials, frames) -> tuple[SequenceSet, list[int]]:
-    """The chosen 1-based trials and [first, end) frames of a set, and the trials' numbers."""
-    numbers = list(range(1, sset.n_trials + 1)) if trials is None else [int(t) for t in trials]
-    bad = [t for t in numbers if not 1 <= t <= sset.n_trials]
-    if bad:
-        raise ValueError(f"conf/slide_loop.yaml: trials {bad} outside 1..{sset.n_trials} of the sequence set")
-    sub = sset.subset([t - 1 for t in numbers])
-    if frames is not None:
-        first, end = (int(f) for f in frames)
-        if not 0 <= first < end <= sset.n_frames or end - first < 2:
-            raise ValueError(f"conf/slide_loop.yaml: frames [{first}, {end}) must hold >= 2 of 0..{sset.n_frames}")
-        cut = slice(first, end)
-        sub = dataclasses.replace(sub, markers=sub.markers[:, cut], displacement=sub.displacement[:, cut],
-                                  found=sub.found[:, cut], pose_mm=sub.pose_mm[:, cut],
-                                  labels=None if sub.labels is None else sub.labels[:, cut])
-    return sub, numbers
 
 
 class Replayer:

@@ -10,7 +10,7 @@ task=choice    -> `out.choice` (choice.json: candidates, MAEs, p, chosen, why) +
                  from the replays alone (report.twin_selection.sim_set_choice, the table's own choice function).
 task=table     -> `out.csv` + `out.md` (report.twin_selection: one row per candidate, `chosen` by the held-out
                  slide MAE with the tie rule: simplest first), `out.figure` (.png/.pdf: real vs the chosen twin's motion over one trial),
-                 `out.bounds` (drift_bounds.csv: the held-out MAE that predictors without a twin reach, loop.slide_diagnosis).
+                 `out.bounds` (drift_bounds.csv: the held-out MAE that predictors without a twin reach, slides.diagnosis).
 """
 
 from __future__ import annotations
@@ -26,17 +26,17 @@ from palpation.apps.slide_loop import select
 from palpation.config_check import app_main
 from palpation.config_ranges import SEEDS, Choice, DictOf, Int, ListOf
 from palpation.io import csv_text, save_json, save_npz, save_text
-from palpation.readers import read_json, read_npz, read_text
-from palpation.loop.folds import FOLDS, trial_folds
-from palpation.loop.slide_diagnosis import BOUNDS_COLUMNS, drift_bounds
-from palpation.loop.slide_twins import (heldout_trials, read_slide_loop, scene_params, schedule_of, score,
-                                        write_fold_twin)
 from palpation.measured_sequences import load_sequence_set
 from palpation.metrics.scores import load_scores
+from palpation.readers import read_json, read_npz, read_text
 from palpation.report.markdown import markdown
 from palpation.report.runs import run_dir
 from palpation.report.twin_selection import (COLUMNS, DATASET_TWINS, Candidate, Member, rule_text, selection_table,
                                              sim_set_choice)
+from palpation.slides.diagnosis import BOUNDS_COLUMNS, drift_bounds
+from palpation.slides.folds import FOLDS, trial_folds
+from palpation.slides.twins import (heldout_trials, read_slide_loop, scene_params, schedule_of, score,
+                                        write_fold_twin)
 
 log = logging.getLogger(__name__)
 
@@ -49,7 +49,7 @@ def fold_twin(cfg: DictConfig) -> dict:
 
 
 def slides(cfg: DictConfig) -> dict:
-    from palpation.loop.slides import make_scene, replay
+    from palpation.slides.replay import make_scene, replay
     from palpation.twin.markers import bind_markers
     from palpation.twin.mesh import SensorMesh, cached_sensor_mesh
 
@@ -83,7 +83,7 @@ def slides(cfg: DictConfig) -> dict:
 
 
 def _member(c: dict, name: str, fold: str | None, n_trials: int) -> Member:
-    """A fold twin stands for its whole parity class of the Silicone trials (loop.folds), also those outside
+    """A fold twin stands for its whole parity class of the Silicone trials (slides.folds), also those outside
     the slide loop's cut, so that the cross-fitted pool covers every trial, as at the paper size."""
     root = Path(c["runs"][name if fold is None else f"{name}_{fold}"])
     scores = {exp: {s: load_scores(run_dir(root, c["experiments"][exp], c["clip_len"], s) / "scores.npz")
@@ -169,7 +169,7 @@ def table(cfg: DictConfig) -> dict:
 
 
 def _bounds(c: dict, sset, reps: list[dict]) -> None:
-    """out.bounds: the held-out MAE of predictors that need no twin (loop.slide_diagnosis.drift_bounds) on the
+    """out.bounds: the held-out MAE of predictors that need no twin (slides.diagnosis.drift_bounds) on the
     replays' trials and frames, so the page can read the slide-loop aim against what is reachable at all."""
     trials = sorted({int(t) for r in reps for t in r["trials"]})
     sub, numbers = select(sset, trials, reps[0]["frames"])

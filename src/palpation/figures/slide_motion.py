@@ -15,7 +15,7 @@ import numpy as np  # noqa: E402
 
 from palpation.figures.loop import sensor_frame  # noqa: E402
 from palpation.io import save_figure  # noqa: E402
-from palpation.loop.slides import motion  # noqa: E402
+from palpation.slides.replay import motion  # noqa: E402
 
 
 def _panel(ax, markers: np.ndarray, over: np.ndarray, gain: float, title: str) -> None:

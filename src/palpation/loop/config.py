@@ -12,6 +12,7 @@ from palpation.loop.effects import EFFECTS, PARAMS, check_effects
 from palpation.loop.generative_config import GenerativeConfig
 from palpation.loop.inputs import TWIST_Z_ANGLES
 from palpation.loop.method import Method
+from palpation.loop.selftest_config import SelftestConfig, parse_case
 
 SAMPLERS = ("gp", "tpe", "random")
 
@@ -37,31 +38,6 @@ class SearchSettings:
 
 
 @dataclass
-class SelftestConfig:
-    """Measured-like sets made by the twin with hidden effects on, then the loop on each (loop.selftest).
-
-    Size = len(cases) x runs_per_case. A case is '+'-joined effects; `unlisted:<name>` is one outside the
-    candidate list (loop.selftest.UNLISTED)."""
-
-    cases: list[str] = ranged(rule=ListOf(Text()), factory=lambda: [
-        "surface_contact", "camera", "viscous", "layered", "marker_anchor",  # singles
-        "surface_contact+friction",  # a dependent pair (friction acts only through contact)
-        "surface_contact+mount", "surface_contact+camera", "camera+layered", "viscous+marker_anchor",  # pairs
-        "unlisted:image_distortion", "unlisted:marker_defect"])  # outside the list
-    runs_per_case: int = ranged(1, Int(ge=1))
-    strength_low: float = ranged(1.0, Num(gt=0))  # injected strength in nominal steps, drawn uniformly in [low, high]
-    strength_high: float = ranged(2.5, Num(gt=0))
-    noise_px: float = ranged(0.2, Num(ge=0))  # std per coordinate (SPEC §13.2: photo noise < 0.2 px)
-    # on in the starting twin (none: as the real mode)
-    base_effects: list[str] = ranged(rule=ListOf(Choice(*EFFECTS), 0, unique=True), factory=list)
-    base_params: dict[str, float] = ranged(rule=DictOf(Num()), factory=lambda: {"E": 1.2225e6})
-    states: list[str] = ranged(rule=ListOf(Text(), unique=True), factory=lambda: ["press", "twist_z", "twist_x"])
-    holdout: list[str] = ranged(rule=ListOf(Text(), 0, unique=True), factory=lambda: ["twist_z"])
-    max_rounds: int = ranged(1, Int(ge=1))
-    seed: int = ranged(0, SEED)
-
-
-@dataclass
 class LoopConfig:
     # the candidates
     effects: list[str] = ranged(rule=ListOf(Choice(*EFFECTS), unique=True), factory=lambda: list(EFFECTS))
@@ -81,14 +57,13 @@ class LoopConfig:
     shell_thickness_mm: float = ranged(1.5, Num(gt=0))  # layered skin (SPEC gives no two-material values; a choice)
     search: SearchSettings = field(default_factory=SearchSettings)
     selftest: SelftestConfig = field(default_factory=SelftestConfig)
-    generative: GenerativeConfig = field(default_factory=GenerativeConfig)  # drawn truths (loop.generative)
+    generative: GenerativeConfig = field(default_factory=GenerativeConfig)  # drawn truths (loop.selftest.generative)
     method: Method = field(default_factory=Method)  # the mechanisms: one loop for every profile (loop.method)
     split_by_kind: str = "auto"  # one twin batch per kind: auto (= on the CPU), true, false
     max_frames: Optional[int] = ranged(None, Int(ge=1, null=True))  # cut every trajectory (smoke tests only)
 
     def validate(self) -> "LoopConfig":
         check_effects(self.effects, "loop.effects")
-        from palpation.loop.selftest import parse_case
         for case in self.selftest.cases:
             parse_case(case, self.selftest.base_effects)
         check_effects(self.selftest.base_effects, "loop.selftest.base_effects")

@@ -1,4 +1,4 @@
-"""Settings of the generative self-test (loop.generative; the draw and the runs: loop.generative).
+"""Settings of the generative self-test (loop.generative; the draw and the runs: loop.selftest.generative).
 
 Strength ranges are [detectable, stable] in nominal steps (loop.effects), drawn log-uniformly. They are declared,
 not derived per run (a derivation through the twin would make a run's truth depend on the device's floats); the

@@ -24,6 +24,7 @@ from typing import Mapping
 from palpation.loop.effects import EFFECTS, PARAMS
 from palpation.loop.gate import heldout_z
 from palpation.loop.polish import polish
+from palpation.loop.problem import evaluate
 
 log = logging.getLogger(__name__)
 
@@ -64,8 +65,6 @@ def needed(problems: list, simulate, limits: Mapping[str, Mapping | None], iters
     """Per problem, per added effect: {"z_off": z at the final parameters, "z_refit": z after re-fitting the rest
     (None where step 1 settled it), "needed": bool}; and the problem without each effect with what that took out,
     {(name, effect): (copy, effects)}."""
-    from palpation.loop.engine import evaluate
-
     tests = [(p, e, without(p, removal_set(p, e))) for p in problems for e in added_effects(p)]
     if not tests:
         return {}, {}

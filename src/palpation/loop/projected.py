@@ -25,6 +25,7 @@ from dataclasses import replace
 from palpation.loop.effects import EFFECTS
 from palpation.loop.gate import decide, heldout_z
 from palpation.loop.polish import polish
+from palpation.loop.problem import evaluate
 from palpation.loop.refit import refit_kept
 
 log = logging.getLogger(__name__)
@@ -47,8 +48,6 @@ def recheck(cfg, problems: list, winners: dict, before: dict, simulate) -> dict[
     its finished point when the fit falls and the held-out is not significantly worse, and gate the winner
     against the projected null. Returns {name: {"ok", "why", "fit", "heldout", "params", "converged"}}.
     `before[name]`: the engine's (summary, params, markers, attribution, searched, residual) of the round."""
-    from palpation.loop.engine import evaluate
-
     pairs = []
     for p in problems:
         w = winners.get(p.name)

@@ -14,8 +14,9 @@ import numpy as np
 from palpation.loop.attribution import attribute
 from palpation.loop.config import LoopConfig
 from palpation.loop.effects import EFFECTS
-from palpation.loop.engine import MIN_RMS_PX, Problem, evaluate, initial_params, refit_dofs, run_rounds, signatures
+from palpation.loop.engine import MIN_RMS_PX, refit_dofs, run_rounds, signatures
 from palpation.loop.inputs import load_targets, set_key
+from palpation.loop.problem import Problem, evaluate, initial_params
 from palpation.loop.recalibrate import recalibrate
 from palpation.loop.refit import finish
 from palpation.loop.unexplained import check_all, noise_estimate

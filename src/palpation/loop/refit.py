@@ -38,12 +38,13 @@ from typing import Mapping
 import numpy as np
 
 from palpation.loop.attribution import Signature, fit_subset
-from palpation.loop.effects import EFFECTS, PARAMS, bounds, clip, move
-from palpation.loop.gate import heldout_z
 from palpation.loop.basins import camera_starts, nominal_steps
 from palpation.loop.compete import at_noise
 from palpation.loop.config import LoopConfig
+from palpation.loop.effects import EFFECTS, PARAMS, bounds, clip, move
+from palpation.loop.gate import heldout_z
 from palpation.loop.polish import distinct_starts, polish
+from palpation.loop.problem import evaluate
 
 log = logging.getLogger(__name__)
 NULL = "~null"  # suffix of a null try's problem name
@@ -103,8 +104,6 @@ def converge(problems: list, simulate, limits: Mapping | None, iters: int, z_cri
     passes from the refit's own end point (`after_passes`): `off_starts` (loop.method.final_refit_off_starts) one with each
     added effect switched off, `stiffness` (loop.method.stiffness_starts) one from E and k_s scaled by each factor,
     `regrid` (loop.method.final_refit_regrid) up to that many with the camera's rotation grid."""
-    from palpation.loop.engine import evaluate
-
     log_ = {p.name: {"before": p.summary(), "kept": 0, "converged": True, "regrid": 0, "off": 0, "stiff": 0}
             for p in problems}
     going = [p for p in problems if p.searched]
@@ -185,8 +184,6 @@ def after_passes(problems: list, simulate, limits: Mapping | None, iters: int, z
       (dev seed 1), and the refit's own grid runs at the final twin, which need not be the start the refit ends from
       (held-out seed 2, run 39: the final twin at a fit of 0.72 px, the last null try's converged end point, where
       the refit ended, at 0.41 px; on the CPU the grid at that point takes the excess 2.02 -> 1.39x)."""
-    from palpation.loop.engine import evaluate
-
     lims = {p.name: {**(limits or {}), **p.trust} for p in problems}
 
     def above(ps):

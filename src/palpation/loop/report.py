@@ -19,7 +19,7 @@ from palpation.camera import MM_PER_PX
 from palpation.io import csv_text as io_csv_text
 from palpation.io import save_text
 from palpation.loop.effects import EFFECTS, PARAMS, bounds, twin_overrides
-from palpation.loop.engine import Problem
+from palpation.loop.problem import Problem
 
 REAL_COLUMNS = ("round", "effect_added", "residual_share_explained", "mae_fit_px", "mae_heldout_px",
                 "mae_mean_mm")

@@ -26,7 +26,11 @@ import numpy as np
 from scipy.stats import chi2
 
 from palpation.loop.attribution import Signature
+from palpation.loop.engine import refit_dofs, signatures
 from palpation.loop.gate import N_SECTORS, clusters
+from palpation.loop.parsimony import prune
+from palpation.loop.problem import evaluate
+from palpation.loop.refit import above_noise, converge
 from palpation.loop.residual import decompose
 from palpation.measured import MeasuredSet
 
@@ -172,10 +176,6 @@ def final_check(p, sigs: list[Signature], cond: Mapping[str, Signature], refit: 
 def check_all(problems: list, simulate, cfg, sigmas: Mapping[str, float]) -> None:
     """The final check of every problem, in one signature batch for those whose twin moved since their
     last round's signatures (a round that kept an effect); the result lands in problem.final."""
-    from palpation.loop.engine import evaluate, refit_dofs, signatures
-    from palpation.loop.parsimony import prune
-    from palpation.loop.refit import above_noise, converge
-
     evaluate([p for p in problems if p.markers is None], simulate)
     m, limits = cfg.method, cfg.search.bounds
     polished = {}

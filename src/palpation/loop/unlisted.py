@@ -2,7 +2,7 @@
 
 Each is a transform of one run's simulated markers, all states at once ((S, 127, 2) -> same), applied before
 the detector noise, with a strength in its own nominal steps and a default range for the generative draw
-(loop.generative). The candidates (loop.effects) are: E, surface contact (k_s), friction (k_t, mu), the camera
+(loop.selftest.generative). The candidates (loop.effects) are: E, surface contact (k_s), friction (k_t, mu), the camera
 (an image similarity S = c + sR(u - c) + d; as the twin applies it, markers = rest + sR(m - m_rest) through a
 re-binding, so it scales and rotates *displacements* isotropically and never moves the rest image), the mount
 (a rigid pose offset), viscous damping (alpha), a layered skin (a stiffer shell of uniform ratio) and
@@ -36,8 +36,8 @@ px the cap binds, and a stiffening is then a weak effect (the summary gives the 
 Strength ranges start where an image similarity fitted to the change leaves ~3x the 0.2 px noise (the test's
 known answer, on a contact-sized press). Whether the loop
 also cannot *absorb* them through its fit is what the self-test measures (outside runs: `unexplained`, and no
-physical effect named beyond the in-list truth); tests/loop/test_generative.py checks that no image similarity
-absorbs any of them.
+physical effect named beyond the in-list truth); tests/loop/selftest/test_generative.py checks that no image
+similarity absorbs any of them.
 """
 
 from __future__ import annotations
@@ -123,7 +123,7 @@ def _anisotropic(m, s, rng, rest):
     return rest + u @ scale.T
 
 
-# one library for both self-tests (loop.selftest cases `unlisted:<name>`, loop.generative draws)
+# one library for both self-tests (loop.selftest cases `unlisted:<name>`, loop.selftest.generative draws)
 UNLISTED: dict[str, Unlisted] = {u.name: u for u in (
     Unlisted("image_distortion", "optical", _distortion, (1.0, 2.5)),
     Unlisted("tangential_distortion", "optical", _tangential, (1.0, 2.5)),

@@ -40,7 +40,7 @@ def aim_checks(df: pd.DataFrame) -> list[tuple[str, str, float, str, float, floa
 
 def slide_loop_rounds(rounds: pd.DataFrame) -> tuple[str, list[str]]:
     """The slide loop's table (per fold and round) and one bullet per fold: held-out MAE first -> last round."""
-    gated = "mae_inner_cv_px" in rounds  # the inner gate's columns (loop.slide_loop COLUMNS), absent in older runs
+    gated = "mae_inner_cv_px" in rounds  # the inner gate's columns (slides.loop COLUMNS), absent in older runs
     rows = [[r["fold"], int(r["round"]), r["effect_added"], num(r["mae_fit_px"], 3), num(r["mae_heldout_px"], 3),
              f"{num(r['vessel_ratio_sim'], 2)} / {num(r['vessel_ratio_real'], 2)}"]
             + ([num(r["mae_inner_cv_px"], 3), num(r["gate_p"], 3)] if gated else []) for _, r in rounds.iterrows()]
@@ -52,7 +52,7 @@ def slide_loop_rounds(rounds: pd.DataFrame) -> tuple[str, list[str]]:
         bounds = str(g["at_bounds"].iloc[-1]) if "at_bounds" in g and g["at_bounds"].notna().iloc[-1] else ""
         bullets.append(f"slide loop, fold {fold}: held-out motion MAE {first:.3f} -> {last:.3f} px{change}; "
                        f"added: {added}." + (f" Symptom: {bounds} (the fit wants more than the physical range; "
-                                             "docs/loop.md \"Slides\")." if bounds else ""))
+                                             "docs/slides.md)." if bounds else ""))
     text = ("\n\nThe slide loop per fold and round (`loop_slides/loop_slides.csv`; each fold fitted on its trials, "
             "scored on the other fold's):\n\n"
             + markdown(["Fold", "Round", "Effect added", "MAE fit (px)", "MAE held-out (px)",
@@ -62,7 +62,7 @@ def slide_loop_rounds(rounds: pd.DataFrame) -> tuple[str, list[str]]:
 
 
 def reachable(df: pd.DataFrame, bounds: pd.DataFrame) -> list[str]:
-    """The slide-loop aim read against drift_bounds.csv (loop.slide_diagnosis): the held-out MAE it asks for, what
+    """The slide-loop aim read against drift_bounds.csv (slides.diagnosis): the held-out MAE it asks for, what
     predictors without a twin reach, and the bounds that know each held-out trial's own motion."""
     by = df.set_index("twin")["heldout_slide_mae_px"].astype(float)
     if "calibrated" not in by.index or not len(bounds):
@@ -101,7 +101,7 @@ def twin_selection_section(df: pd.DataFrame, rounds: pd.DataFrame | None = None,
             "complex one has a significantly lower held-out MAE, paired by trial (one-sided Wilcoxon signed-rank, "
             f"alpha {TIE_ALPHA:g}), by at least {TIE_MIN_GAIN_PX:g} px per trial on average (`twin_selection.csv` "
             "column `why`). The slide loop keeps an effect only if its fits that "
-            "left out a trial of the fitting fold score that trial better (paired test; docs/loop.md \"Slides\"). "
+            "left out a trial of the fitting fold score that trial better (paired test; docs/slides.md). "
             "Figure: `judge/slide_motion.png`.\n\n"
             + markdown(["Twin", "Fitted on", "Held-out slide MAE (px)", "Vessel ratio sim / real",
                         "Silicone AP (x-fit)", "Silicone AUROC (x-fit)", "Meat AP", "Meat AUROC",

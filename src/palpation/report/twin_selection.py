@@ -19,9 +19,9 @@ import numpy as np
 import pandas as pd
 from sklearn.metrics import average_precision_score, roc_auc_score
 
-from palpation.loop.slide_gate import GateSettings, verdict
 from palpation.markers.lattice import N_MARKERS
 from palpation.metrics.scores import Scores
+from palpation.slides.gate import GateSettings, verdict
 
 COLUMNS = ("twin", "fitted_on", "heldout_slide_mae_px", "vessel_ratio_sim", "vessel_ratio_real",
            "silicone_ap_crossfit", "silicone_auroc_crossfit", "meat_ap", "meat_auroc", "silicone_pos_share_05",
@@ -74,7 +74,7 @@ def crossfit(members: list[Member], seed: int) -> tuple[np.ndarray, np.ndarray]:
         for t in np.unique(trial[keep]).tolist():
             if t in owner:
                 raise ValueError(f"Silicone trial {t} is held out of two twins' folds ({owner[t]} and {k}); "
-                                 "cross-fitting needs folds that partition the trials (loop.folds)")
+                                 "cross-fitting needs folds that partition the trials (slides.folds)")
             owner[t] = k
         probs.append(s.probs[keep])
         labels.append(s.labels[keep])

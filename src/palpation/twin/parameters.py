@@ -115,7 +115,7 @@ PARAMETERS: dict[str, TwinParameter] = {p.name: p for p in (
     TwinParameter("mu", "1", "contact", "mu", "env", CONTACT_KERNEL, 0.0, 1.5, False,
                   "Coulomb coefficient, from none (the reference) to 1.5", needs="contact",
                   loop=LoopStep("friction", "friction", 0.5, nonneg=True)),
-    # compliant phantom with vessel inclusions (issue 12; docs/loop.md "Slides"): contact.phantom_model=foundation
+    # compliant phantom with vessel inclusions (issue 12; docs/slides.md): contact.phantom_model=foundation
     TwinParameter("k_f", "N/m^3 (pressure per penetration)", "contact", "k_f", "env", CONTACT_KERNEL, 1.0e6, 2.0e8,
                   True, "Winkler modulus E/H: silicone E 30 kPa - 1 MPa over a 5-30 mm column", needs="phantom"),
     TwinParameter("incl_ratio", "E_vessel / E_phantom", "contact", "incl_ratio", "env", CONTACT_KERNEL, 1.0, 100.0,

@@ -9,11 +9,13 @@ import numpy as np
 import pytest
 
 from palpation.loop.config import LoopConfig, SearchSettings, SelftestConfig
-from palpation.loop.method import Method
 from palpation.loop.inputs import load_targets
+from palpation.loop.method import Method
 from palpation.loop.real import base_params
-from palpation.loop.selftest import COLUMNS, UNLISTED, confusion, parse_case, rows_csv, run_selftest, summary
+from palpation.loop.selftest.fixed import COLUMNS, confusion, rows_csv, run_selftest, summary
+from palpation.loop.selftest_config import parse_case
 from palpation.loop.simulate import LoopSimulator, loop_twin_config
+from palpation.loop.unlisted import UNLISTED
 from palpation.markers.template import rest_template
 from palpation.measured import MeasuredState, load_measured_set, make_measured_set
 from palpation.twin.config import TwinConfig

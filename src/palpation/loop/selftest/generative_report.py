@@ -10,8 +10,8 @@ from typing import Mapping
 import numpy as np
 
 from palpation.io import save_json, save_text
-from palpation.loop.generative import COLUMNS, rows_csv
 from palpation.loop.generative_config import SPLITS
+from palpation.loop.selftest.generative import COLUMNS, rows_csv
 from palpation.loop.unlisted import UNLISTED_PREFIX
 
 NAN = float("nan")

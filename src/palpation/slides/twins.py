@@ -4,7 +4,7 @@
   mechanism): the fold's final parameters (slide_loop.json) on the slide loop's base twin, with the compliant
   phantom (foundation) switched on, so that a Sim set is simulated with what the fold fitted.
 * Any twin replayed along the slides its fitting never saw: the trials of the slide loop's cut, less the
-  fold's own for a fold twin, in the real scene (loop.slides: compliant phantom, the photo's vessels), scored
+  fold's own for a fold twin, in the real scene (slides.replay: compliant phantom, the photo's vessels), scored
   by the motion MAE and the over-/off-vessel ratio exactly as the slide loop scores its held-out fold.
 """
 
@@ -17,8 +17,8 @@ import yaml
 
 from palpation.io import save_text
 from palpation.readers import read_json
-from palpation.loop.folds import FOLDS, other
-from palpation.loop.slides import SCENE_PARAMETERS, SCHEDULE_KEYS, frame_mae, vessel_ratio
+from palpation.slides.folds import FOLDS, other
+from palpation.slides.replay import SCENE_PARAMETERS, SCHEDULE_KEYS, frame_mae, vessel_ratio
 from palpation.twin.config import TwinConfig
 from palpation.twin.parameters import PARAMETERS
 

@@ -6,7 +6,7 @@ the envs from there, and two fold processes only take turns on the card (one H10
 a 60-env call 19-20 s beside the other fold's). The frame-resident kernel runs any batch up to one wave (264
 reference envs on an H100) in about one env's time, so one call of both folds' 100-120 envs costs about what one
 fold's did (docs/twin.md).
-The folds share nothing else; an env's result does not depend on its batch (loop.slides.replay_many), so on the CPU
+The folds share nothing else; an env's result does not depend on its batch (slides.replay.replay_many), so on the CPU
 the loop gives the same bits as one fold after the other.
 """
 

@@ -1,4 +1,4 @@
-"""The slide loop's honest gate (issue 12; docs/loop.md "Slides", "Inner gate"): an effect is kept only if,
+"""The slide loop's honest gate (issue 12; docs/slides.md, "Inner gate"): an effect is kept only if,
 fitted without a trial of the fitting fold, it scores that trial better than the current twin, weighed against
 the trial-to-trial noise by a one-sided paired test over the fold's trials.
 

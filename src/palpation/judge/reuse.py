@@ -6,10 +6,10 @@ config (results/judge/slides/.hydra/<twin>/config.yaml), written as a twin optio
 package twin), so the replay uses exactly the twin whose Sim set trained the reused models. The runs keep the
 layout <root>/<experiment>/L<n>/seed<s>/ with scores.npz and metrics.json (checkpoints and PR curves are left out).
 
-    python -m palpation.loop.judge_reuse SRC_RESULTS DEST calibrated photo_loop
+    python -m palpation.judge.reuse SRC_RESULTS DEST calibrated photo_loop
     # then: gpu_judge.sh OUTDIR --configfile workflow/profiles/paper/judge_reuse.yaml (DEST = results/judge_reuse)
 
-A developer tool outside the results DAG: argparse, like judge_budget.
+A developer tool outside the results DAG: argparse, like judge.budget.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
-"""The judge's device-time estimate (palpation.loop.judge_budget): the counting and the bench fit."""
+"""The judge's device-time estimate (palpation.judge.budget): the counting and the bench fit."""
 
 import pytest
 
-from palpation.loop.judge_budget import budget, slide_loop_envs, twin_seconds
+from palpation.judge.budget import budget, slide_loop_envs, twin_seconds
 
 
 def test_slide_loop_envs_worst_case_keeps_the_largest_rounds():

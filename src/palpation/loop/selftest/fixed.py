@@ -1,4 +1,4 @@
-"""Self-test: measured-like sets made by the twin with hidden effects, then the loop on each, as in real use.
+"""The fixed self-test: measured-like sets made by the twin with hidden effects, then the loop on each, as in real use.
 
 Every run starts from the same twin as the real mode (no contact; `base_effects` on, none by default)
 and injects one *case*: a single effect, a dependent pair (friction with the surface contact it acts
@@ -11,7 +11,8 @@ takes a random unit direction). Detector-like Gaussian noise `noise_px` per coor
 is saved in the generic format and read back: the loop knows only the file. It must name the exact in-list
 set, and report `unexplained` exactly when an out-of-list effect is in the data (loop.unexplained).
 Every run of a batch advances in lockstep. Size: `cases` x `runs_per_case` (conf/loop/*.yaml).
-loop.generative draws its runs instead of taking them from the list, and shares everything after the draw.
+loop.selftest.generative draws its runs instead of taking them from the list, and shares everything after the draw
+(Injection, simulate_injections, make_sets, loop_on_sets, here).
 """
 
 from __future__ import annotations
@@ -27,10 +28,12 @@ import numpy as np
 from palpation.io import csv_text
 from palpation.loop.config import LoopConfig
 from palpation.loop.effects import EFFECTS, PARAMS, move
-from palpation.loop.engine import Problem, evaluate, initial_params, run_rounds
+from palpation.loop.engine import run_rounds
 from palpation.loop.inputs import Target
 from palpation.loop.parsimony import added_effects
+from palpation.loop.problem import Problem, evaluate, initial_params
 from palpation.loop.real import make_problem
+from palpation.loop.selftest_config import parse_case
 from palpation.loop.unexplained import check_all, noise_estimate
 from palpation.loop.unlisted import UNLISTED, UNLISTED_PREFIX
 from palpation.measured import MeasuredState, load_measured_set, make_measured_set, save_measured_set
@@ -51,9 +54,9 @@ class Injection:
     base_effects: list[str]
     params: dict[str, float]  # the twin that made the data
     redrawn: int = 0  # draws after the first (its twin diverged; simulate_injections)
-    # loop.generative: the run's name (problem, set file) and its own random stream, which makes its set (out-of-list
-    # draws, noise), so that a run is remade alone; the fixed self-test leaves both unset (one stream for all runs)
-    # and names runs by number
+    # loop.selftest.generative: the run's name (problem, set file) and its own random stream, which makes its set
+    # (out-of-list draws, noise), so that a run is remade alone; the fixed self-test leaves both unset (one stream for
+    # all runs) and names runs by number
     tag: str = ""
     rng: np.random.Generator | None = field(default=None, repr=False, compare=False)
     rest: np.ndarray | None = field(default=None, repr=False, compare=False)  # its twin's rest markers (unlisted)
@@ -65,23 +68,6 @@ class Injection:
     @property
     def name(self) -> str:
         return self.tag or f"run{self.run:03d}"
-
-
-def parse_case(case: str, base_effects, where: str = "loop.selftest.cases") -> tuple[list[str], list[str]]:
-    """'surface_contact+friction' -> (['surface_contact', 'friction'], []); 'unlisted:x' -> ([], ['x'])."""
-    parts = [c.strip() for c in str(case).split("+") if c.strip()]
-    inl = [c for c in parts if not c.startswith(UNLISTED_PREFIX)]
-    unl = [c[len(UNLISTED_PREFIX):] for c in parts if c.startswith(UNLISTED_PREFIX)]
-    bad = [c for c in inl if c not in EFFECTS] + [UNLISTED_PREFIX + u for u in unl if u not in UNLISTED]
-    if bad or not parts:
-        raise ValueError(f"{where}: case '{case}' names unknown effect(s) {bad}; known: {sorted(EFFECTS)} and "
-                         f"{[UNLISTED_PREFIX + u for u in UNLISTED]}, joined with '+'")
-    for e in inl:
-        missing = [r for r in EFFECTS[e].requires if r not in inl and r not in base_effects]
-        if missing:
-            raise ValueError(f"{where}: case '{case}': {e} acts only through {missing}; inject them together "
-                             f"('{'+'.join([*missing, e])}') or add them to loop.selftest.base_effects")
-    return inl, unl
 
 
 def base_for(effects, cfg: LoopConfig, base: Mapping[str, float]) -> tuple[list[str], dict[str, float]]:
@@ -147,7 +133,8 @@ def simulate_injections(injections: list[Injection], states: list[Target], simul
     """Every injected twin at `states` (one batch): markers (runs, states, 127, 2). Strong draws can leave the
     twin's stable range (viscous near its top strength diverges on four of seeds 3-7): such a run is redrawn up to
     MAX_REDRAWS times (injections is updated in place, the log says which), else the error stands.
-    `draw_again(inj, attempt)` draws a run anew (default: `redraw`, the fixed self-test's; loop.generative's own)."""
+    `draw_again(inj, attempt)` draws a run anew (default: `redraw`, the fixed self-test's; loop.selftest.generative's
+    own)."""
     draw_again = draw_again or (lambda inj, attempt: redraw(inj, cfg, base, attempt))
     n = len(states)
     markers, failed = simulate([(t.state, inj.params) for inj in injections for t in states])

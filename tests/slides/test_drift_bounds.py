@@ -1,11 +1,11 @@
-"""loop.slide_diagnosis.drift_bounds: what a held-out slide MAE can reach without a twin (issue 12), on toy
+"""slides.diagnosis.drift_bounds: what a held-out slide MAE can reach without a twin (issue 12), on toy
 slides whose answer is known."""
 
 import numpy as np
 import pytest
 
-from palpation.loop.slide_diagnosis import BOUNDS_COLUMNS, drift_bounds
 from palpation.measured_sequences import make_sequence_set
+from palpation.slides.diagnosis import BOUNDS_COLUMNS, drift_bounds
 
 F = 12
 RNG = np.random.default_rng(3)

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from palpation.loop.folds import other, trial_folds
-from palpation.loop.slide_loop import SearchSettings, SlideLoopSettings, at_bounds, candidates_of, run_slide_loop
-from palpation.loop.slides import frame_mae, frame_mae_abs, make_scene, motion, plan_replay, replay, slide_modes, vessel_ratio
 from palpation.markers.template import rest_template
 from palpation.measured_sequences import make_sequence_set
+from palpation.slides.folds import other, trial_folds
+from palpation.slides.loop import SearchSettings, SlideLoopSettings, at_bounds, candidates_of, run_slide_loop
+from palpation.slides.replay import frame_mae, frame_mae_abs, make_scene, motion, plan_replay, replay, slide_modes, vessel_ratio
 from palpation.twin.config import TwinConfig
 from palpation.twin.markers import bind_markers
 from palpation.twin.mesh import cached_sensor_mesh
@@ -75,7 +75,7 @@ def test_replay_markers_and_metrics():
 
 def test_replay_plans_each_trial_once_per_geometry(monkeypatch):
     """Candidates that differ only inside the kernels share a trial's pose schedule; a mount offset plans anew."""
-    import palpation.loop.slides as slides
+    import palpation.slides.replay as slides
 
     planned = []
     monkeypatch.setattr(slides, "plan_replay", lambda *a, **k: planned.append(a[3]) or plan_replay(*a, **k))
@@ -175,7 +175,7 @@ def test_lead_in_slides_to_the_first_pose_at_depth():
 
 
 def test_phantom_tilt_deepens_the_press_along_the_slope_and_stays_out_of_the_sim_twin():
-    from palpation.loop.slide_twins import fold_params, scene_params, twin_overrides
+    from palpation.slides.twins import fold_params, scene_params, twin_overrides
 
     s = toy_set(1, 3, step_mm=4.0)
     scene = make_scene(s)
@@ -193,7 +193,7 @@ def test_phantom_tilt_deepens_the_press_along_the_slope_and_stays_out_of_the_sim
 
 
 def test_motion_decomposition_separates_common_translation_and_affine_motion():
-    from palpation.loop.slide_diagnosis import decomposition, replay_errors
+    from palpation.slides.diagnosis import decomposition, replay_errors
 
     s = toy_set(2, 5)
     rest = s.rest.astype(np.float64)
@@ -231,9 +231,9 @@ def test_folds_side_by_side_give_the_same_loop():
 
 
 def test_fold_batches_run_each_call_once_and_fail_loudly():
-    """loop.fold_batches: the folds' calls wait for each other and run as one `many` call (a fold that has finished no
+    """slides.fold_batches: the folds' calls wait for each other and run as one `many` call (a fold that has finished no
     longer holds the other back); an error in the shared call reaches every fold instead of leaving one waiting."""
-    from palpation.loop.fold_batches import run_folds_together
+    from palpation.slides.fold_batches import run_folds_together
 
     seen = []
 

@@ -7,12 +7,12 @@ Run r of seed s draws from np.random.default_rng([s, r]) alone (settings: loop.g
    contact, which counts), until n are in (one that would overshoot is passed over);
 3. the base twin's E, log-uniform in `E`, and where contact is on the contact stiffness k_s, log-uniform in `k_s`;
 4. every other in-list effect's strength, log-uniform in its [detectable, stable] range (nominal steps), a
-   multi-dof one along a random direction (selftest.switch_on, as the fixed self-test);
+   multi-dof one along a random direction (fixed.switch_on, as the fixed self-test);
 5. then, making the set: the outside effect's own draws and the detector noise, from the same stream.
-A draw whose twin diverges is drawn again from default_rng([s, r, attempt]) (selftest.simulate_injections).
+A draw whose twin diverges is drawn again from default_rng([s, r, attempt]) (fixed.simulate_injections).
 Everything after the draw is the fixed self-test's: the set is saved and read back, the loop starts from the
-real mode's twin (selftest.base_for: E 1.2225 MPa, no contact) and runs up to `max_rounds` rounds, all runs of a
-batch in lockstep (selftest.loop_on_sets). Dev seeds (< 1000) choose mechanisms and thresholds; test seeds
+real mode's twin (fixed.base_for: E 1.2225 MPa, no contact) and runs up to `max_rounds` rounds, all runs of a
+batch in lockstep (fixed.loop_on_sets). Dev seeds (< 1000) choose mechanisms and thresholds; test seeds
 (>= 1000) choose nothing and are run once, at the end, with the same settings.
 
 Resumable: each finished run is saved atomically as <out>/runs/<split>_seed<s>_run<r>.json with a fingerprint of
@@ -36,7 +36,8 @@ from palpation.loop.config import LoopConfig
 from palpation.loop.effects import EFFECTS
 from palpation.loop.generative_config import SPLITS, TEST_SEED_START
 from palpation.loop.inputs import Target
-from palpation.loop.selftest import Injection, base_for, loop_on_sets, make_sets, simulate_injections, switch_on
+from palpation.loop.selftest.fixed import (Injection, base_for, loop_on_sets, make_sets, simulate_injections,
+                                           switch_on)
 from palpation.measured import MeasuredState
 
 log = logging.getLogger(__name__)

@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 
 from palpation.loop.config import LoopConfig, SelftestConfig
-from palpation.loop.engine import initial_params
 from palpation.loop.inputs import load_targets
-from palpation.loop.selftest import draw_injections, make_sets, remake_set, simulate_injections
+from palpation.loop.problem import initial_params
+from palpation.loop.selftest.fixed import draw_injections, make_sets, remake_set, simulate_injections
 from palpation.markers.template import rest_template
 from palpation.measured import load_measured_set, make_measured_set
-from tests.loop.test_selftest import STATES
+from tests.loop.selftest.test_fixed import STATES
 
 REST = rest_template().astype(np.float64)
 

@@ -11,7 +11,7 @@ effect's parameters on the fitted trials and keeps the best effect if it lowers 
   starts if it lists fewer), the later ones are TPE's;
 * `grid`: the effects' value lists (value i of every list of one effect is candidate i), one twin batch.
 Which effect and value are chosen uses the fitted trials only; the held-out trials and the labels only score.
-The inner gate (`gate.inner`, loop.slide_gate): the best `gate.tries` effects by fitted MAE are searched again
+The inner gate (`gate.inner`, slides.gate): the best `gate.tries` effects by fitted MAE are searched again
 once per inner fold of the fitting fold's trials (leave one trial out), each fit scored on the trials it left
 out; the best-ranked effect whose left-out trials improve significantly (paired test) is kept, else none.
 """
@@ -27,15 +27,15 @@ from typing import Callable
 import numpy as np
 import optuna
 
-from palpation.loop.fold_batches import run_folds_together
-from palpation.loop.folds import other, trial_folds
-from palpation.loop.slide_gate import GateSettings, inner_splits, verdict
-from palpation.loop.slides import SCENE_PARAMETERS, SCHEDULE_KEYS, frame_mae, frame_mae_abs, slide_modes, vessel_ratio
 from palpation.measured_sequences import SequenceSet
+from palpation.slides.fold_batches import run_folds_together
+from palpation.slides.folds import other, trial_folds
+from palpation.slides.gate import GateSettings, inner_splits, verdict
+from palpation.slides.replay import SCENE_PARAMETERS, SCHEDULE_KEYS, frame_mae, frame_mae_abs, slide_modes, vessel_ratio
 from palpation.twin.parameters import PARAMETERS
 
 log = logging.getLogger(__name__)
-# mae_*: marker motion about each trial's median (loop.slides.frame_mae); mae_abs_heldout_px: the absolute error
+# mae_*: marker motion about each trial's median (slides.replay.frame_mae); mae_abs_heldout_px: the absolute error
 # at_bounds: the kept parameters at a physical bound ("; "-joined), a symptom (slide_loop.at_bounds)
 # mae_inner_cv_px, gate_p: the inner gate's mean left-out MAE of the kept effect and its paired test's p (nan: off)
 COLUMNS = ("fold", "round", "effect_added", "mae_fit_px", "mae_heldout_px", "vessel_ratio_sim", "vessel_ratio_real",
@@ -45,7 +45,7 @@ SAMPLERS = ("tpe", "grid")
 
 
 def bounds_of(name: str):
-    """The search range of a slide-loop parameter: the twin's registry, else the real scene's (loop.slides)."""
+    """The search range of a slide-loop parameter: the twin's registry, else the real scene's (slides.replay)."""
     return PARAMETERS.get(name) or SCENE_PARAMETERS[name]
 
 
@@ -82,7 +82,7 @@ class SlideLoopSettings:
                 if not p.low <= min(values) <= max(values) <= p.high:
                     raise ValueError(f"{where}: effects.{effect}.{name} = {list(values)} leaves its physical bounds "
                                      f"[{p.low:g}, {p.high:g}] {p.unit} ({p.why}; palpation/twin/parameters.py, "
-                                     "loop/slides.py SCENE_PARAMETERS)")
+                                     "slides/replay.py SCENE_PARAMETERS)")
         if self.max_rounds < 0 or self.min_improvement_px < 0:
             raise ValueError(f"{where}: need max_rounds >= 0 and min_improvement_px >= 0")
         s = self.search
@@ -108,7 +108,7 @@ def _score(evaluate: Evaluate, sset: SequenceSet, cands: list[dict]) -> tuple[np
 
 def at_bounds(params: dict, rel: float = 0.02) -> list[str]:
     """Parameters within `rel` of their search width (log width for log-scaled ones) of a registry bound: a
-    symptom that the fit wants more than the physical range allows (docs/loop.md "Slides")."""
+    symptom that the fit wants more than the physical range allows (docs/slides.md)."""
     out = []
     for name, value in params.items():
         p = PARAMETERS.get(name) or SCENE_PARAMETERS.get(name)
@@ -258,7 +258,7 @@ def run_fold(evaluate: Evaluate, fit: SequenceSet, held: SequenceSet, settings: 
                      fold, k, settings.min_improvement_px, owners[best], mae[best])
             break
         kept, kept_v = ranked[0], None
-        if gate.inner:  # the best `tries` effects, each fitted without every trial in turn (loop.slide_gate)
+        if gate.inner:  # the best `tries` effects, each fitted without every trial in turn (slides.gate)
             tried = ranked[:gate.tries]
             inner = (_inner_grid(mat, owners, tried, splits) if settings.search.sampler == "grid" else
                      _inner_tpe(score, current, tried, splits, settings, seed + 250)) if splits else {}
@@ -296,8 +296,8 @@ def run_slide_loop(evaluate: Evaluate, sset: SequenceSet, settings: SlideLoopSet
                    workers: int = 1, batch_folds: bool = False) -> dict:
     """Both folds: rows (COLUMNS), per-fold parameters per round, and the folds' trial numbers. The folds share
     nothing, so `workers` 2 runs them in two spawned processes (`evaluate` must then pickle: apps.slide_loop's
-    Replayer) with the same result as one after the other (tests/loop/test_slides.py). `batch_folds`: the folds in
-    threads whose twin calls run as one batch (loop.fold_batches; `evaluate.many` runs them)."""
+    Replayer) with the same result as one after the other (tests/slides/test_replay.py). `batch_folds`: the folds in
+    threads whose twin calls run as one batch (slides.fold_batches; `evaluate.many` runs them)."""
     folds = trial_folds(trial_numbers)
     jobs = [(evaluate, sset.subset(idx), sset.subset(folds[other(fold)]), settings, fold) for fold, idx in folds.items()]
     if batch_folds:

@@ -7,8 +7,8 @@ time (docs/results/bench_twin.json, fitted as frames x (a + b x envs)), the pape
 `REPLAY_FACTOR` is the scene replay's cost per env-frame over a plain Sim slide (compliant phantom with the
 vessels as inclusions; measured on the CPU, coarse mesh: 17.2 vs 13.3 ms, docs/loop.md "Paper-profile run").
 
-    python -m palpation.loop.judge_budget                 # paper profile
-    python -m palpation.loop.judge_budget --profile quick
+    python -m palpation.judge.budget                      # paper profile
+    python -m palpation.judge.budget --profile quick
 
 A developer estimate, outside the results DAG: argparse, like the other benchmarks (twin/benchmark.py).
 """
@@ -68,12 +68,13 @@ def twin_seconds(bench: list[dict], resolution: str) -> tuple[float, float]:
 
 def slide_work(profile: dict, sequences: str, mesh: str | None) -> dict:
     """The slide loop of the profile's judge: trials, replay frames, candidates per effect, rounds."""
+    # imported here: Hydra and the twin load only when a slide loop is priced, not for --help
     from hydra import compose, initialize_config_dir
 
-    from palpation.apps.slide_loop import select
-    from palpation.loop.slides import make_scene, plan_replay
-    from palpation.loop.folds import trial_folds
     from palpation.measured_sequences import load_sequence_set
+    from palpation.slides.folds import trial_folds
+    from palpation.slides.replay import make_scene, plan_replay
+    from palpation.slides.selection import select
     from palpation.twin.mesh import SensorMesh, cached_sensor_mesh
     from palpation.twin.runner import tip_node_B
 

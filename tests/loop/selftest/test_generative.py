@@ -9,14 +9,14 @@ import os
 import numpy as np
 import pytest
 
-from palpation.loop import generative as gen
 from palpation.loop.config import LoopConfig, SelftestConfig
 from palpation.loop.effects import EFFECTS
-from palpation.loop.engine import initial_params
 from palpation.loop.generative_config import GenerativeConfig
-from palpation.loop.generative_report import summary
 from palpation.loop.inputs import load_targets
-from palpation.loop.selftest import make_sets, simulate_injections
+from palpation.loop.problem import initial_params
+from palpation.loop.selftest import generative as gen
+from palpation.loop.selftest.fixed import make_sets, simulate_injections
+from palpation.loop.selftest.generative_report import summary
 from palpation.loop.unlisted import ANISO_PX, DEFECT_MARKERS, DEFECT_PX, STIFFEN_PX, UNLISTED, twin_rest
 from palpation.markers.template import rest_template
 from palpation.measured import MeasuredState, load_measured_set, make_measured_set, save_measured_set

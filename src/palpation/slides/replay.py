@@ -10,7 +10,7 @@
   waypoint, so the twin's markers are read where the real sensor was photographed.
 * Metrics: per-frame marker motion MAE (px, over the markers found in the real frame): the markers about
   each trial's per-marker median, in real and sim alike, so a static offset (rest pose, camera, mount)
-  does not dominate (docs/loop.md "Slides"); the absolute MAE is kept beside it (frame_mae_abs). And the
+  does not dominate (docs/slides.md); the absolute MAE is kept beside it (frame_mae_abs). And the
   over-vessel / off-vessel ratio of that motion (SPEC §13.6's quantity: real 1.55 / 1.45 px), both over
   the real labels.
 """
@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from palpation.loop.residual import MODES, decompose
 from palpation.measured_sequences import SequenceSet
 from palpation.twin.config import TwinConfig
 from palpation.twin.markers import MarkerBinding, project_markers_np
@@ -48,7 +49,7 @@ class SceneParameter:
 
 # The phantom's surface slope (depth change per mm of world x / y about the slides' mean pose): not recorded.
 # With friction a slope drags the skin more as the press deepens: the slow drift of the whole marker field
-# along the real slides (docs/loop.md "Slides", diagnosis). Without friction it moves nearly nothing.
+# along the real slides (docs/slides.md, diagnosis). Without friction it moves nearly nothing.
 SCENE_PARAMETERS = {p.name: p for p in (
     SceneParameter("tilt_x", "mm/mm", -0.03, 0.03, False, "phantom slope along world x; +-1.7 deg: levelled by eye"),
     SceneParameter("tilt_y", "mm/mm", -0.03, 0.03, False, "phantom slope along world y; +-1.7 deg: levelled by eye"),
@@ -158,7 +159,7 @@ def split_params(params: dict) -> tuple[dict, dict]:
     if unknown:
         raise ValueError(f"slide loop: unknown parameter(s) {unknown}; use per-env twin parameters "
                          f"{sorted(env_names)} or {list(SCHEDULE_KEYS)} (palpation.twin.parameters, "
-                         "loop.slides.SCENE_PARAMETERS)")
+                         "slides.replay.SCENE_PARAMETERS)")
     env = {env_names[k]: float(v) for k, v in params.items() if k in env_names}
     return env, {k: float(v) for k, v in params.items() if k in SCHEDULE_KEYS}
 
@@ -236,7 +237,7 @@ def _found_mean(err: np.ndarray, sset: SequenceSet) -> np.ndarray:
 
 def frame_mae(sim: np.ndarray, sset: SequenceSet) -> np.ndarray:
     """(..., T) per-trial mean over frames and found markers of the motion error px, |motion(sim) -
-    motion(real)|; sim (..., T, F, 127, 2). The slide loop's residual (docs/loop.md "Slides": why motion)."""
+    motion(real)|; sim (..., T, F, 127, 2). The slide loop's residual (docs/slides.md: why motion)."""
     return _found_mean(np.linalg.norm(motion(sim) - motion(sset.markers), axis=-1), sset)
 
 
@@ -260,8 +261,6 @@ def vessel_ratio(markers: np.ndarray, labels: np.ndarray | None) -> float:
 def slide_modes(sim: np.ndarray, sset: SequenceSet) -> dict:
     """The residual of every frame split into the photo loop's modes (loop.residual), averaged over the
     frames of `sset`, plus the MAE over the vessel-labelled markers and off them (the detector's split)."""
-    from palpation.loop.residual import MODES, decompose
-
     rows = [decompose(sim[t, f], sset.markers[t, f]).row() for t in range(sset.n_trials) for f in range(sset.n_frames)]
     out = {f"share_{m}": float(np.mean([r[f"share_{m}"] for r in rows])) for m in MODES}
     for key in ("rotation_deg", "scale_pct", "stretch_pct"):

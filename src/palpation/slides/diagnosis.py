@@ -1,6 +1,6 @@
-"""What the slides' marker motion is made of (issue 12; docs/loop.md "Slides", diagnosis).
+"""What the slides' marker motion is made of (issue 12; docs/slides.md, diagnosis).
 
-Per frame, the motion of the found markers (each about its median over the trial, loop.slides.motion) is
+Per frame, the motion of the found markers (each about its median over the trial, slides.replay.motion) is
 split into a common translation of the whole field, what a per-frame affine map of the rest positions adds,
 and what is left; plus the frame-to-frame jitter (second difference of the raw positions, a noise scale).
 For a replay's markers (C, T, F, 127, 2) it also gives the error of that common translation and of the rest.
@@ -9,9 +9,9 @@ For a replay's markers (C, T, F, 127, 2) it also gives the error of that common 
 judge's held-out MAE (rule twin_selection writes them as judge/drift_bounds.csv; the results page reads the
 slide-loop aim against them).
 
-    python -m palpation.loop.slide_diagnosis [--sequences results/data/silicone/silicone_sequences] [--bounds CSV]
+    python -m palpation.slides.diagnosis [--sequences results/data/silicone/silicone_sequences] [--bounds CSV]
 
-The decomposition is a developer diagnostic (argparse, like loop.judge_budget).
+The decomposition is a developer diagnostic (argparse, like judge.budget).
 """
 
 from __future__ import annotations
@@ -21,8 +21,8 @@ import argparse
 import numpy as np
 import pandas as pd
 
-from palpation.loop.folds import other, trial_folds
-from palpation.loop.slides import frame_mae, motion
+from palpation.slides.folds import other, trial_folds
+from palpation.slides.replay import frame_mae, motion
 
 
 def common_translation(m: np.ndarray, found: np.ndarray) -> np.ndarray:
@@ -129,7 +129,7 @@ def _predictions(sset, folds: dict[str, list[int]]) -> dict[str, np.ndarray]:
 
 def drift_bounds(sset, trial_numbers: list[int]) -> pd.DataFrame:
     """One row per PREDICTORS entry: the motion MAE (px) it scores on the held-out trials of each fold and pooled
-    (the mean over trials of loop.slides.frame_mae, as the judge's held-out slide MAE), and its change against no
+    (the mean over trials of slides.replay.frame_mae, as the judge's held-out slide MAE), and its change against no
     motion. `trial_numbers`: the 1-based numbers of sset's trials (they set the odd / even folds)."""
     folds = trial_folds(trial_numbers)
     rows = []

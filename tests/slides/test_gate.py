@@ -4,11 +4,11 @@ it scores that trial better than the current twin (paired test over the fold's t
 import numpy as np
 import pytest
 
-from palpation.loop.slide_gate import GateSettings, inner_splits, paired_p, verdict
-from palpation.loop.slide_loop import SearchSettings, SlideLoopSettings, run_slide_loop
-from palpation.loop.slides import motion
+from palpation.slides.gate import GateSettings, inner_splits, paired_p, verdict
+from palpation.slides.loop import SearchSettings, SlideLoopSettings, run_slide_loop
+from palpation.slides.replay import motion
 
-from tests.loop.test_slides import toy_set
+from tests.slides.test_replay import toy_set
 
 # per trial, where the phantom's slope "wants" to be: it alternates, so a slope fitted on some trials of a fold
 # lowers their error but not the error of a trial it did not see (an overfit, like the paper run's phantom_tilt)
