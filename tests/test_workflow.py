@@ -197,7 +197,7 @@ def test_judge_reuse_reruns_only_what_the_slide_loop_changes(tmp_path):
 
 
 def test_sim_set_twin_follows_the_choice(tmp_path):
-    """Issue 12 item 5 (docs/loop.md "Which twin makes the Sim set"): with dataset.twin auto the main Sim set waits for
+    """Issue 12 item 5 (docs/slides.md "Which twin makes the Sim set"): with dataset.twin auto the main Sim set waits for
     rule twin_choice, which needs the candidates' held-out replays (slide loop, fold twins) and no training; a pinned
     twin (tiny, quick) reads that twin's fit directly; an unknown value stops the DAG build in one line."""
     tiny = ("--config", "profile=tiny")

@@ -198,7 +198,7 @@ JUDGE_TWINS = ["calibrated", "photo_loop"] + [f"slide_loop_{f}" for f in JUDGE_F
 # recipe than the main sweep's, photo_loop trains here too instead of reusing the sweep's runs (docs/loop.md)
 JUDGE_RECIPE = JUDGE.get("recipe") or TRAIN["recipe"]
 # dataset.twin (schema: auto | calibrated | photo_loop | slide_loop): the main Sim set's twin; auto = rule
-# twin_choice's (the held-out slide MAE with the tie rule), a name pins it (docs/loop.md "Which twin makes the Sim set")
+# twin_choice's (the held-out slide MAE with the tie rule), a name pins it (docs/slides.md "Which twin makes the Sim set")
 DATASET_TWIN = config["dataset"]["twin"]
 # photo_loop's judge Sim set is the main one only where the main set is pinned to it; else the judge simulates its own
 JUDGE_PHOTO_IS_MAIN = DATASET_TWIN == "photo_loop"
@@ -210,7 +210,7 @@ TWIN_ABL_LOOP_RUN = TRAIN_RUN if JUDGE_PHOTO_IS_MAIN else str(
     run_dir(f"{TRAIN_DIR}/twin_loop", "{exp}", "{clip_len}", "{seed}"))
 # judge.reuse: {twin: {fit: <dir>/twin_fit/fitted.yaml, runs: <runs root>}}: a candidate's fitted twin and trained
 # runs taken as they are (an earlier run's, workflow/scripts/judge_reuse.py), so neither is refitted nor retrained;
-# only what changed (e.g. the slide loop) reruns (docs/loop.md "Paper-profile run")
+# only what changed (e.g. the slide loop) reruns (docs/slides.md "Paper-profile run")
 JUDGE_REUSE = JUDGE.get("reuse") or {}
 for _twin, _spec in JUDGE_REUSE.items():
     if _twin not in JUDGE_TWINS or not isinstance(_spec, dict) or set(_spec) != {"fit", "runs"}:

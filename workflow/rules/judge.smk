@@ -1,4 +1,4 @@
-# Issue 12: the downstream judge (docs/loop.md "Twin on the task"). Each candidate twin gets a Sim set and
+# Issue 12: the downstream judge (docs/slides.md "Twin on the task"). Each candidate twin gets a Sim set and
 # A-to-B / A-to-C models (judge.seeds); Silicone trials are scored cross-fitted (a fold twin's models only on
 # the other fold's trials); the twin is chosen by its held-out real-slide motion MAE (no test labels).
 # Candidates: calibrated (calibrate.smk), photo_loop (loop.smk), slide_loop_odd / slide_loop_even (the
@@ -96,7 +96,7 @@ use rule simulate_dataset as judge_dataset with:
         f"results/benchmarks/judge_dataset/dataset_{{twin}}.tsv",
 
 
-# The main Sim set's twin (dataset.twin auto; docs/loop.md "Which twin makes the Sim set"): the candidate the held-out
+# The main Sim set's twin (dataset.twin auto; docs/slides.md "Which twin makes the Sim set"): the candidate the held-out
 # slide MAE chooses (report.twin_selection.pick, the table's own function), from the replays alone, so rule
 # simulate_dataset waits for the slide loop and the replays but for no training. Its fitted.yaml is the chosen twin's.
 rule twin_choice:

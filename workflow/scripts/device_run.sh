@@ -27,7 +27,7 @@ device_unlock() {
   for p in $(pgrep -f "snakemake --workflow-profile"); do  # its working folder: another checkout's run is no matter
     if [ "$(readlink "/proc/$p/cwd")" = "$PWD" ]; then
       echo "$1: another Snakemake run (pid $p) holds this checkout's lock; run this one in its own copy of the" \
-        "checkout (docs/loop.md, \"Paper-profile run\")" >&2
+        "checkout (docs/slides.md, \"Paper-profile run\")" >&2
       exit 4
     fi
   done

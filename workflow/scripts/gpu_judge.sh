@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 12's downstream judge at the paper profile on a CUDA machine (docs/loop.md "Twin on the task",
+# Issue 12's downstream judge at the paper profile on a CUDA machine (docs/slides.md "Twin on the task",
 # "Paper-profile run"): the slide loop, the candidate twins' replays, Sim sets and A-to-B / A-to-C runs, the
 # table. Only the jobs these targets need run (no maps, no recipe/clip-length ablations); every seed of a
 # candidate trains in one process (train.seeds_together). Needs no gmsh: carry results/twin/mesh_<res>.npz/.json
@@ -13,7 +13,7 @@
 # until it exits 0, then cp results/judge_gpu/* $OUT/
 # OUTDIR then holds twin_selection.csv and loop_slides.csv (copy both to docs/results/), twin_selection.md,
 # slide_motion.png/.pdf, slide_loop.json (results page section "Twin on the task"), choice.json (rule twin_choice:
-# the main Sim set's twin, docs/loop.md "Which twin makes the Sim set") and judge_logs.tgz.
+# the main Sim set's twin, docs/slides.md "Which twin makes the Sim set") and judge_logs.tgz.
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/device_run.sh"  # the detached, resumable run (pid guard, unlock, LIMIT_S)
 out=${1:?usage: gpu_judge.sh OUTDIR [snakemake args...]}; shift

@@ -1,4 +1,4 @@
-"""One self-test run's final stage on the CPU, from where a (GPU) self-test left it (docs/loop.md, "Held-out seed").
+"""One self-test run's final stage on the CPU, from where a (GPU) self-test left it (docs/journal/2026-11-26-loop-heldout-seed-stalls.md).
 
     PYTHONPATH=src python workflow/scripts/loop_stall_rerun.py OUTDIR RUN MODE [--mesh M] [--measured S]
 

@@ -5,7 +5,7 @@ settings and the sequence set, and prices it with the H100 measurements the repo
 time (docs/results/bench_twin.json, fitted as frames x (a + b x envs)), the paper run's rule times
 (docs/results/bench_reproduction.json) and seeds trained together vs apart (docs/results/bench_train.json).
 `REPLAY_FACTOR` is the scene replay's cost per env-frame over a plain Sim slide (compliant phantom with the
-vessels as inclusions; measured on the CPU, coarse mesh: 17.2 vs 13.3 ms, docs/loop.md "Paper-profile run").
+vessels as inclusions; measured on the CPU, coarse mesh: 17.2 vs 13.3 ms, docs/slides.md "Paper-profile run").
 
     python -m palpation.judge.budget                      # paper profile
     python -m palpation.judge.budget --profile quick

@@ -1,4 +1,4 @@
-"""Reuse an earlier judge run's candidates (issue 12; docs/loop.md "Paper-profile run"): a candidate twin's
+"""Reuse an earlier judge run's candidates (issue 12; docs/slides.md "Paper-profile run"): a candidate twin's
 fitted twin and its trained runs, copied so that a later run (config `judge.reuse`) reruns only what changed.
 
 The fitted twin is the one the earlier run replayed: the `twin` section of its judge_slides job's composed

@@ -130,7 +130,7 @@ def camera_starts(problems: list, simulate, limits: Mapping[str, Mapping | None]
 
 
 def nominal_steps(steps: Mapping[str, float]) -> dict[str, float]:
-    """The grid step of the principal point and the rotation: their nominal steps (loop.steps over effects.py's)."""
+    """The grid step of the principal point and the rotation: their nominal steps (loop.method.steps over effects.py's)."""
     from palpation.loop.effects import EFFECTS
     moves = {n: amt for d in EFFECTS["camera"].dofs for n, _, amt in d.moves}
     return {n: float(steps.get(n, moves[n])) for n in BINDING}

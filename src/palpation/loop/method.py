@@ -2,7 +2,7 @@
 
 Profiles (conf/loop/{quick,paper,tiny}.yaml) differ only in size: mesh, trials, states. What the loop *does*
 lives here, as `loop.method` (a group of LoopConfig): each switch was measured on self-test seeds that choose
-mechanisms (the fixed list's seeds, then the generative dev seeds, docs/loop.md "Mechanisms") and is set to the
+mechanisms (the fixed list's seeds, then the generative dev seeds, docs/loop.md §3) and is set to the
 value that paid. Change one only to measure it, e.g. `loop.method.compete=false`; the generative self-test's
 fingerprint includes the method, so a run made under another method is never mixed into a table.
 """

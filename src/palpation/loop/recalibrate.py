@@ -173,7 +173,7 @@ def best_trial(study: optuna.Study) -> optuna.trial.FrozenTrial:
     ok = ranked_trials(study)
     if not ok:
         raise ValueError(f"loop study '{study.study_name}': every trial diverged; narrow the bounds in "
-                         "loop.effects.PARAMS or lower the nominal steps (loop.steps)")
+                         "loop.effects.PARAMS or lower the nominal steps (loop.method.steps)")
     return ok[0]
 
 

@@ -146,7 +146,7 @@ def effect_off_starts(p, limits: Mapping | None) -> list[dict]:
     point. An effect kept in an early round can hold a compensating basin after a later effect arrived, and the
     projected null tested it only against the set before it (held-out seed 2, run 31: contact + camera won round 1
     while the true pair's search stalled at 1.67 px, the mount joined in round 2, the final refit ended at 0.53 px;
-    on the CPU, LM from that end point with the camera off reaches the truth: docs/loop.md, "Held-out seed")."""
+    on the CPU, LM from that end point with the camera off reaches the truth: docs/journal/2026-11-26-loop-heldout-seed-stalls.md)."""
     out = []
     for e in p.effects:
         names = EFFECTS[e].params

@@ -81,7 +81,7 @@ def reachable(df: pd.DataFrame, bounds: pd.DataFrame) -> list[str]:
     if beyond:
         text += (f" Even {', '.join(n.replace('_', ' ') for n in beyond)} misses it: the aim needs more of each held-out "
                  "trial's own motion than its whole-field drift, and what the other fold shares of that drift predicts "
-                 "nothing (docs/loop.md, \"What a held-out slide MAE can reach\").")
+                 "nothing (docs/slides.md, \"What a held-out slide MAE can reach\").")
     return [text]
 
 

@@ -1,4 +1,4 @@
-"""The downstream judge of issue 12: which twin makes the Sim set (docs/loop.md "Twin on the task").
+"""The downstream judge of issue 12: which twin makes the Sim set (docs/slides.md "Twin on the task").
 
 Each candidate twin has Sim->Silicone (A-to-B) and Sim->Meat (A-to-C) models over seeds. Silicone scores are
 cross-fitted: a Silicone trial counts only from models whose twin never saw it. A twin fitted on the slides

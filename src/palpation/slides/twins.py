@@ -1,4 +1,4 @@
-"""Candidate twins of the downstream judge (issue 12, docs/loop.md "Twin on the task") on the real slides.
+"""Candidate twins of the downstream judge (issue 12, docs/slides.md "Twin on the task") on the real slides.
 
 * A slide-loop fold's twin as a twin option (twin_fit/fitted.yaml, package twin, the calibration's
   mechanism): the fold's final parameters (slide_loop.json) on the slide loop's base twin, with the compliant

@@ -154,7 +154,7 @@ def simulate_injections(injections: list[Injection], states: list[Target], simul
         raise ValueError(f"self-test: the twin diverged while making run(s) "
                          f"{[injections[i].run for i in np.flatnonzero(failed.any(axis=1))]} after {MAX_REDRAWS} "
                          "redraws; lower the strengths (loop.selftest.strength_high, loop.generative.strengths) or the "
-                         "nominal steps (loop.steps)")
+                         "nominal steps (loop.method.steps)")
     return markers
 
 
