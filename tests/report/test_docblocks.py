@@ -70,3 +70,22 @@ def test_unknown_key_names_the_file_and_line(tmp_path, capsys):
         docblocks.run(tmp_path)
     assert docblocks.main(["check", "--root", str(tmp_path)]) == 1
     assert "docblocks: error:" in capsys.readouterr().err
+
+
+def test_a_changed_selftest_record_makes_the_loop_page_stale(tmp_path):
+    root = repo_copy(tmp_path)
+    record = root / "docs" / "results" / "loop_selftest_seed7.csv"
+    table = pd.read_csv(record)
+    table["effects_named"] = table["effects_injected"]  # every run named exactly: 100 %
+    table.to_csv(record, index=False)
+    assert [s.key for s in docblocks.run(root)] == ["loop.fixed.seed7"]
+    docblocks.run(root, write=True)
+    assert "<!-- gen:loop.fixed.seed7 -->100 %<!-- /gen -->" in (root / "docs" / "loop.md").read_text()
+
+
+def test_a_markdown_record_without_its_line_is_an_error(tmp_path):
+    root = repo_copy(tmp_path)
+    report = root / "docs" / "results" / "paper" / "loop" / "report.md"
+    report.write_text(report.read_text().replace("the rest is", "the remainder is"))
+    with pytest.raises(ValueError, match="the rest is N× the noise"):
+        docblocks.run(root)
