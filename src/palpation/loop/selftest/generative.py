@@ -143,10 +143,11 @@ def saved(runs_dir: Path, fp: str) -> dict[str, dict]:
 
 def record(inj: Injection, seed: int, row: dict, fitted: Mapping[str, float], fp: str) -> dict:
     """One finished run: the CSV row (COLUMNS) and what the summary reads."""
-    keys = truth_keys(inj)
+    keys = truth_keys(inj)  # the fitted side also gives every named effect's parameters (a spurious one's too)
+    named = list(dict.fromkeys([*keys, *(n for e in row["named"] for n in EFFECTS[e].params)]))
     out = {"run": inj.run, "seed": seed, "split": split_of(seed), "effects_injected": inj.label or "none",
            **{k: row[k] for k in ("effects_named", "mae_before_px", "mae_after_px", "excess_ratio")},
-           "params_true": _params_json(inj.params, keys), "params_fitted": _params_json(fitted, keys)}
+           "params_true": _params_json(inj.params, keys), "params_fitted": _params_json(fitted, named)}
     detail = {k: row[k] for k in ("injected_effects", "unlisted", "named", "unexplained", "strengths", "betas",
                                   "redrawn", "tries")}
     # what the rounds kept before loop.parsimony took out what the final twin does not need (both verdicts kept)
