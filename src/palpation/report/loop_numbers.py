@@ -1,0 +1,199 @@
+"""The residual loop's numbers in the docs: the real photos' loop tables and the self-tests' measures.
+
+The self-tests' measures are those of loop.selftest.fixed.summary and loop.selftest.generative_report.split_summary,
+recomputed from the CSV they write (importing the loop would import the twin). Registered in report.docnumbers.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+from palpation.readers import read_text
+from palpation.report.records import FIX, record_csv as _csv
+
+
+def loop_change(results: Path, column: str, unit: str, digits: int, name: str = "loop_real.csv") -> str:
+    """First round → last round of the residual loop on the real photos (loop_real.csv)."""
+    values = _csv(results, name, ("round", column)).sort_values("round")[column]
+    return f"{values.iloc[0]:.{digits}f} → {values.iloc[-1]:.{digits}f} {unit}"
+
+
+def loop_last(results: Path, column: str, unit: str, digits: int, name: str) -> str:
+    """The last round's value of a residual-loop table."""
+    values = _csv(results, name, ("round", column)).sort_values("round")[column]
+    return f"{values.iloc[-1]:.{digits}f} {unit}"
+
+
+def loop_effects(results: Path, name: str = "loop_real.csv") -> str:
+    effects = _csv(results, name, ("round", "effect_added")).sort_values("round")["effect_added"]
+    return ", then ".join(f"`{e}`" for e in effects if e != "none")
+
+
+def loop_same_table(results: Path, a: str, b: str) -> str:
+    """Whether two runs of the real-photo loop wrote the same table (their CSVs at the records' 4 decimals)."""
+    cols = ("round", "effect_added", "mae_fit_px", "mae_heldout_px", "mae_mean_mm")
+    ta, tb = (_csv(results, n, cols).fillna("") for n in (a, b))
+    if ta.astype(str).equals(tb.astype(str)):
+        return "the same table to the fourth decimal"
+    return (f"another table (held-out {loop_change(results, 'mae_heldout_px', 'px', 4, b)} against "
+            f"{loop_change(results, 'mae_heldout_px', 'px', 4, a)})")
+
+
+def loop_rest_ratio(results: Path, name: str) -> str:
+    """The final residual against the detector noise, as the loop's report.md states it: only Markdown holds it,
+    so it is read from the verdict's one line "the rest is N× the noise" (an error if that line is gone)."""
+    text = read_text(results / name, FIX, "record")
+    found = re.findall(r"the rest is ([0-9]+(?:\.[0-9]+)?)\s*×\s*the noise", text)
+    if len(found) != 1:
+        raise ValueError(f"record {results / name}: expected one 'the rest is N× the noise' line, found {len(found)}")
+    return f"{found[0]}×"
+
+
+def loop_target(results: Path, name: str) -> str:
+    """The accuracy target's verdict, as the loop's report.md states it: only Markdown holds it, so it is read
+    from the verdict's one line "Target (...): mean X mm against Y mm: met|missed" (an error if that line is gone)."""
+    text = read_text(results / name, FIX, "record")
+    found = re.findall(r"^\* Target [^:]*: mean [0-9.]+ mm against ([0-9.]+) mm: (met|missed)", text, re.M)
+    if len(found) != 1:
+        raise ValueError(f"record {results / name}: expected one '* Target ...: met|missed' line, found {len(found)}")
+    return f"target ≤ {found[0][0]} mm {found[0][1]}"
+
+
+# --- the residual loop's self-tests: the measures of loop.selftest.fixed.summary and
+# loop.selftest.generative_report.split_summary, recomputed from the CSV they write (importing the loop would
+# import the twin); a run's effects are '+'-joined, an outside one `unlisted:<kind>`, `unexplained` a verdict.
+
+def _effects(cell) -> list[str]:
+    return [e for e in str(cell).split("+") if e and e not in ("none", "nan")]
+
+
+def selftest_runs(results: Path, name: str) -> list[dict]:
+    table = _csv(results, name, ("run", "effects_injected", "effects_named", "mae_before_px", "mae_after_px"))
+    runs = []
+    for r in table.to_dict("records"):
+        injected, named = _effects(r["effects_injected"]), _effects(r["effects_named"])
+        runs.append({**r, "injected": {e for e in injected if not e.startswith("unlisted:")},
+                     "unlisted": any(e.startswith("unlisted:") for e in injected),
+                     "named": set(named) - {"unexplained"}, "unexplained": "unexplained" in named})
+    return runs
+
+
+def _pct(x: float) -> str:
+    return f"{100 * x:.0f} %"
+
+
+def _share(flags: list[bool]) -> float:
+    if not flags:
+        raise ValueError("a self-test record without the runs a measure needs; regenerate the record")
+    return sum(flags) / len(flags)
+
+
+def fixed_exact(runs: list[dict]) -> list[bool]:
+    """Fixed list: the in-list set named, no more and no less, and not `unexplained` (in-list runs)."""
+    return [r["named"] == r["injected"] and not r["unexplained"] for r in runs if not r["unlisted"]]
+
+
+def fixed_exact_share(results: Path, name: str) -> str:
+    return _pct(_share(fixed_exact(selftest_runs(results, name))))
+
+
+def fixed_summary(results: Path, name: str) -> str:
+    """The fixed-list self-test's aims: exact set, MAE cut (in-list), outside runs `unexplained`, in-list ones."""
+    runs = selftest_runs(results, name)
+    inl = [r for r in runs if not r["unlisted"]]
+    out = [r for r in runs if r["unlisted"]]
+    cut = [1 - r["mae_after_px"] / r["mae_before_px"] for r in inl if r["mae_before_px"] > 0]
+    return (f"exact in-list set {_pct(_share(fixed_exact(runs)))} of {len(inl)}, MAE cut {_pct(_share(cut))}, "
+            f"out-of-list `unexplained` {_pct(_share([r['unexplained'] for r in out]))} of {len(out)}, in-list "
+            f"`unexplained` {sum(r['unexplained'] for r in inl)}")
+
+
+def fixed_inlist_unexplained(results: Path, names: tuple[str, ...]) -> str:
+    return " + ".join(str(sum(r["unexplained"] for r in selftest_runs(results, n) if not r["unlisted"]))
+                      for n in names)
+
+
+def reduced_mae_after(results: Path, before: str, after: str) -> str:
+    """Mean MAE after the loop over a reduced self-test's runs, before → after a change of the method."""
+    values = [sum(r["mae_after_px"] for r in runs) / len(runs)
+              for runs in (selftest_runs(results, before), selftest_runs(results, after))]
+    return f"{values[0]:.2f} → {values[1]:.2f} px"
+
+
+def reduced_run_after(results: Path, before: str, after: str, injected: str) -> str:
+    """One run's MAE after the loop (the run that injected `injected`), before → after a change of the method."""
+    values = []
+    for n in (before, after):
+        found = [r["mae_after_px"] for r in selftest_runs(results, n) if r["effects_injected"] == injected]
+        if len(found) != 1:
+            raise ValueError(f"record {results / n}: {len(found)} runs injected {injected}, expected one")
+        values.append(found[0])
+    return f"{values[0]:.2f} → {values[1]:.2f} px"
+
+
+def reduced_converged(results: Path, before: str, after: str) -> str:
+    runs = [selftest_runs(results, n) for n in (before, after)]
+    exact = [sum(fixed_exact(r)) for r in runs]
+    unexplained = [sum(x["unexplained"] for x in r if not x["unlisted"]) for r in runs]
+    return (f"{exact[0]} → {exact[1]} of {len(fixed_exact(runs[1]))} exact, in-list `unexplained` "
+            f"{unexplained[0]} → {unexplained[1]}")
+
+
+def general_exact(runs: list[dict], n: int | None = None) -> list[bool]:
+    """Generative: the in-list set named, no more and no less (`unexplained` aside), on in-list runs (of n effects)."""
+    return [r["named"] == r["injected"] for r in runs
+            if not r["unlisted"] and (n is None or len(r["injected"]) == n)]
+
+
+def general_summary(results: Path, name: str) -> str:
+    runs = selftest_runs(results, name)
+    inl = [r for r in runs if not r["unlisted"]]
+    out = [r for r in runs if r["unlisted"]]
+    three = general_exact(runs, 3)
+    cut = [1 - r["mae_after_px"] / r["mae_before_px"] for r in inl if r["mae_before_px"] > 0]
+    n_unexplained = sum(r["unexplained"] for r in inl)
+    verdict = (f"`unexplained` on {n_unexplained} in-list runs" if n_unexplained
+               else "no `unexplained` on an in-list run")
+    outside = (f"outside runs `unexplained` {sum(r['unexplained'] for r in out)} of {len(out)}, nothing named beyond "
+               f"the truth in {sum(r['named'] <= r['injected'] for r in out)} of {len(out)}")
+    return (f"exact in-list set **{_pct(_share(general_exact(runs)))}** of {len(inl)} (three-effect runs "
+            f"{sum(three)} of {len(three)}), MAE cut {_pct(_share(cut))}, {verdict}; {outside}")
+
+
+def general_exact_of(results: Path, name: str) -> str:
+    exact = general_exact(selftest_runs(results, name))
+    return f"{_pct(_share(exact))} of {len(exact)}"
+
+
+def general_shared(results: Path, earlier: str, later: str) -> str:
+    """Exact in-list runs of two measurements on the runs (seed, run) they share: earlier → later of n."""
+    a, b = ({(r["seed"], r["run"]): r for r in selftest_runs(results, n)} for n in (earlier, later))
+    keys = [k for k in sorted(set(a) & set(b)) if not a[k]["unlisted"]]
+    if not keys:
+        raise ValueError(f"records {earlier} and {later} share no in-list run")
+    return (f"{sum(general_exact([a[k] for k in keys]))} → {sum(general_exact([b[k] for k in keys]))} of "
+            f"{len(keys)} exact")
+
+
+def general_below_power(results: Path, name: str) -> str:
+    """In-list runs with effects whose MAE before lies under the gate's power floor, the floor as the run's
+    selftest_general.md states it (only Markdown holds it: "The gate's power floor: MAE before X px")."""
+    text = read_text(results / name.replace(".csv", ".md"), FIX, "record")
+    found = re.findall(r"power floor: MAE before ([0-9.]+) px", text)
+    if len(found) != 1:
+        raise ValueError(f"record {results / name.replace('.csv', '.md')}: no single 'power floor' line")
+    runs = [r for r in selftest_runs(results, name) if not r["unlisted"] and r["injected"]]
+    return str(sum(r["mae_before_px"] < float(found[0]) for r in runs))
+
+
+def general_soft_e(results: Path, name: str, injected: str) -> str:
+    """The run that injected `injected`: its residual against the noise, its fitted and its true E."""
+    table = _csv(results, name, ("effects_injected", "excess_ratio", "params_true", "params_fitted"))
+    rows = table[table["effects_injected"] == injected]
+    if len(rows) != 1:
+        raise ValueError(f"record {results / name}: {len(rows)} runs injected {injected}, expected one")
+    r = rows.iloc[0]
+    fitted, true = json.loads(r["params_fitted"])["E"], json.loads(r["params_true"])["E"]
+    return f"{r['excess_ratio']:.1f}× the noise: E {fitted / 1e6:.2f} against {true / 1e6:.2f} MPa"
