@@ -1,4 +1,4 @@
-"""Hydra entry point: calibrate the twin against the flat-tip photos, then validate it (issue 4).
+"""Hydra entry point: calibrate the twin against the flat-tip photos, then validate it.
 
     python -m palpation.apps.calibrate                           project objective (conf/calibration/project)
     python -m palpation.apps.calibrate calibration=reference     the paper's joint objective (SPEC §6.2)

@@ -1,4 +1,4 @@
-"""Hydra entry point: close the loop with measured data (issue 5).
+"""Hydra entry point: close the loop with measured data.
 
     python -m palpation.apps.loop                      the real photos: rounds, report, final twin
     python -m palpation.apps.loop mode=selftest        hidden effects in twin-made sets, confusion table

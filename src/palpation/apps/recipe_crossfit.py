@@ -1,4 +1,4 @@
-"""Hydra entry point: calibration and map threshold cross-fitted between the two real sets (issue 15).
+"""Hydra entry point: calibration and map threshold cross-fitted between the two real sets.
 
     python -m palpation.apps.recipe_crossfit runs_root=results/recipe out_dir=results/recipe/report
 From the recipe ablation's stored runs (no retraining; the rows of palpation.apps.recipe_report): a Sim-trained

@@ -1,4 +1,4 @@
-"""Hydra entry point: the recipe ablation table, calibration and the seed-ensemble uncertainty (issue 15).
+"""Hydra entry point: the recipe ablation table, calibration and the seed-ensemble uncertainty.
 
     python -m palpation.apps.recipe_report runs_root=results/recipe out_dir=results/recipe/report
 Reads <runs_root>/<recipe>/<switch_off>/<config>/L<clip_len>/seed<seed>/ (rule train_recipe) and writes

@@ -1,4 +1,4 @@
-"""Hydra entry point: the results page, every table of a run beside the paper's numbers (issue 8).
+"""Hydra entry point: the results page, every table of a run beside the paper's numbers.
 
     python -m palpation.apps.results_page                                   results/ -> results/README.md
     python -m palpation.apps.results_page root=/data/results out=/tmp/page.md profile=paper

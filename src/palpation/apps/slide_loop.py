@@ -1,4 +1,4 @@
-"""Hydra entry point: the residual loop on measured slides (issue 12; docs/slides.md).
+"""Hydra entry point: the residual loop on measured slides (docs/slides.md).
 
 Reads a sequence set (`sequences`), keeps `trials` and `frames`, and runs slides.loop with the twin
 of the real scene (slides.replay). Writes `out.csv` (one row per fold and round: fold, round, effect_added,

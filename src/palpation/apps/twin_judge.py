@@ -1,4 +1,4 @@
-"""Hydra entry point: the downstream judge of the candidate twins (issue 12; docs/slides.md "Twin on the task").
+"""Hydra entry point: the downstream judge of the candidate twins (docs/slides.md "Twin on the task").
 
 task=fold_twin -> `out.fit`: the slide loop's `fold` twin as a twin option (twin_fit/fitted.yaml), from
                  `slide_loop` (slide_loop.json); a Sim set is simulated with it like with any fitted twin.
