@@ -9,7 +9,7 @@ fingerprint includes the method, so a run made under another method is never mix
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 from palpation.config_ranges import Choice, DictOf, Int, ListOf, Num, ranged
 from palpation.loop.effects import PARAMS
@@ -82,23 +82,13 @@ class Method:
     steps: dict[str, float] = ranged(rule=DictOf(Num(gt=0)), factory=dict)  # nominal step per parameter (effects.py)
 
     def validate(self) -> "Method":
-        for where, names in (("loop.method.round0_params", self.round0_params),
-                             ("loop.method.recalibrate", self.recalibrate), ("loop.method.steps", list(self.steps))):
-            unknown = [n for n in names if n not in PARAMS]
-            if unknown:
-                raise ValueError(f"{where}: unknown parameter(s) {unknown}; known: {sorted(PARAMS)}")
-        checks = {"final_refit_regrid": self.final_refit_regrid >= 0, "camera_grid_refine": self.camera_grid_refine >= 0,
-                  "tries_per_round": self.tries_per_round >= 1, "pair_tries": self.pair_tries >= 0,
-                  "final_refit_iters": self.final_refit_iters >= 0, "polish_iters": self.polish_iters >= 0,
-                  "polish_starts": self.polish_starts >= 1, "final_refit_starts": self.final_refit_starts >= 1,
-                  "gate_fit_rel": 0 < self.gate_fit_rel <= 1, "gate_z": self.gate_z > 0,
-                  "unexplained_alpha": 0 < self.unexplained_alpha < 1, "unexplained_ratio": self.unexplained_ratio > 0}
-        if self.prune not in PRUNE_MODES:
-            raise ValueError(f"loop.method.prune={self.prune}: need one of {PRUNE_MODES}")
-        bad = [k for k, ok in checks.items() if not ok]
-        if bad:
-            raise ValueError(f"{', '.join(f'loop.method.{k}={getattr(self, k)}' for k in bad)} out of range: iters, "
-                             "regrid, refine, pair_tries >= 0; starts, tries >= 1; 0 < gate_fit_rel <= 1; gate_z, "
-                             "unexplained_ratio > 0; 0 < unexplained_alpha < 1")
+        """The declared rule of every field (a Method built in code, not through Hydra's checked path), and the
+        names of `steps`, which a rule on values cannot see."""
+        for f in fields(self):
+            rule, value = f.metadata.get("rule"), getattr(self, f.name)
+            if rule is not None and rule.problem(value) is not None:
+                raise ValueError(f"loop.method.{f.name}={value}: need {rule.describe()}")
+        unknown = [n for n in self.steps if n not in PARAMS]
+        if unknown:
+            raise ValueError(f"loop.method.steps: unknown parameter(s) {unknown}; known: {sorted(PARAMS)}")
         return self
-
