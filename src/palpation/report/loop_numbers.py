@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import re
+from datetime import datetime
 from pathlib import Path
 
 from palpation.readers import read_text
@@ -197,3 +198,34 @@ def general_soft_e(results: Path, name: str, injected: str) -> str:
     r = rows.iloc[0]
     fitted, true = json.loads(r["params_fitted"])["E"], json.loads(r["params_true"])["E"]
     return f"{r['excess_ratio']:.1f}× the noise: E {fitted / 1e6:.2f} against {true / 1e6:.2f} MPa"
+
+
+def general_quiet(results: Path, name: str, quiet_excess: float = 1.06) -> str:
+    """Exact in-list runs, and those missing only effects the final residual does not ask for (a subset named,
+    excess <= quiet_excess x the noise: loop.selftest.generative_report.QUIET_EXCESS, restated to keep the loop out)."""
+    table = _csv(results, name, ("excess_ratio",))
+    runs = selftest_runs(results, name)
+    inl = [(r, x) for r, x in zip(runs, table["excess_ratio"]) if not r["unlisted"]]
+    exact = sum(r["named"] == r["injected"] for r, _ in inl)
+    quiet = sum(r["named"] < r["injected"] and x <= quiet_excess for r, x in inl)
+    return f"{exact} → {exact + quiet} of {len(inl)} ({_pct((exact + quiet) / len(inl))})"
+
+
+def general_by_effect(results: Path, name: str, effect: str) -> str:
+    """One effect over the in-list runs: named where injected, and named where not (spurious)."""
+    inl = [r for r in selftest_runs(results, name) if not r["unlisted"]]
+    has = [r for r in inl if effect in r["injected"]]
+    spurious = sum(effect in r["named"] and effect not in r["injected"] for r in inl)
+    return f"{sum(effect in r['named'] for r in has)} of {len(has)} (spurious in {spurious} of {len(inl) - len(has)})"
+
+
+def general_wall(results: Path, log_name: str) -> str:
+    """The generative self-test's batches as its log times them: from the start line to each "runs [...] saved"."""
+    stamps = re.findall(r"^\[(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d),\d+\]\[[\w.]+\]\[INFO\] - generative self-test"
+                        r"(?::)? (?:runs \[(.*?)\] saved|\()", read_text(results / log_name, FIX, "record"), re.M)
+    if len(stamps) < 2 or stamps[0][1]:
+        raise ValueError(f"record {results / log_name}: no start line followed by a 'runs [...] saved' line")
+    start = datetime.fromisoformat(stamps[0][0])
+    saved = [(datetime.fromisoformat(t), runs.count("'") // 2) for t, runs in stamps[1:] if runs]
+    end, n = saved[0]
+    return f"{n} runs in {(end - start).total_seconds():.0f} s"

@@ -15,7 +15,8 @@ real mode's twin (fixed.base_for: E 1.2225 MPa, no contact) and runs up to `max_
 batch in lockstep (fixed.loop_on_sets). Dev seeds (< 1000) choose mechanisms and thresholds; test seeds
 (>= 1000) choose nothing and are run once, at the end, with the same settings.
 
-Resumable: each finished run is saved atomically as <out>/runs/<split>_seed<s>_run<r>.json with a fingerprint of
+Timing: each batch's wall time is appended to <out>/timing.json (apart from the runs, whose records stay
+byte-identical for a seed). Resumable: each finished run is saved atomically as <out>/runs/<split>_seed<s>_run<r>.json with a fingerprint of
 every setting that shapes a run (not the split, seeds, run count or batch size); a run whose file carries the
 current fingerprint is skipped, and the CSV is assembled from every saved run with that fingerprint.
 """
@@ -26,6 +27,7 @@ import dataclasses
 import hashlib
 import json
 import logging
+import time
 from pathlib import Path
 from typing import Callable, Mapping
 
@@ -155,6 +157,16 @@ def record(inj: Injection, seed: int, row: dict, fitted: Mapping[str, float], fp
     return {"fingerprint": fp, **out, **detail, "n_effects": len(inj.effects)}
 
 
+def log_batch(path: Path, fp: str, tags: list[str], wall_s: float) -> None:
+    """Append one batch's wall time (settings, runs, seconds) to `path`, a JSON list (an unreadable one restarts)."""
+    try:
+        batches = json.loads(path.read_text()) if path.exists() else []
+    except ValueError:
+        batches = []
+    batches.append({"fingerprint": fp, "runs": tags, "wall_s": round(wall_s, 1)})
+    save_json(path, batches)
+
+
 def run_generative(cfg: LoopConfig, simulate, base: Mapping[str, float], template: list[Target],
                    geometry: Mapping[str, MeasuredState], rest_px: np.ndarray, out_dir: Path, db_path: Path,
                    tkey: str, rest_of: Callable[[Mapping[str, float]], np.ndarray] | None = None,
@@ -172,6 +184,7 @@ def run_generative(cfg: LoopConfig, simulate, base: Mapping[str, float], templat
              g.seeds(), g.runs, fp, len(g.seeds()) * g.runs - len(todo), len(todo))
     size = g.batch or max(len(todo), 1)
     for i in range(0, len(todo), size):
+        start = time.perf_counter()
         chunk = todo[i:i + size]
         seed_of = {tag(s, r): s for s, r in chunk}
         injections = [draw(cfg, base, s, r) for s, r in chunk]
@@ -183,6 +196,7 @@ def run_generative(cfg: LoopConfig, simulate, base: Mapping[str, float], templat
         rows, problems = loop_on_sets(cfg, injections, paths, simulate, base, db_path, tkey, g.max_rounds, progress)
         for inj, row, p in zip(injections, rows, problems):
             save_json(runs_dir / f"{inj.tag}.json", record(inj, seed_of[inj.tag], row, p.params, fp))
+        log_batch(out_dir / "timing.json", fp, [inj.tag for inj in injections], time.perf_counter() - start)
         log.info("generative self-test: runs %s saved", [inj.tag for inj in injections])
     order = {s: i for i, s in enumerate(SPLITS)}
     return sorted(saved(runs_dir, fp).values(), key=lambda r: (order[r["split"]], r["seed"], r["run"]))

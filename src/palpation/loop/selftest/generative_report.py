@@ -15,6 +15,10 @@ from palpation.loop.selftest.generative import COLUMNS, rows_csv
 from palpation.loop.unlisted import UNLISTED_PREFIX
 
 NAN = float("nan")
+# A run that names a strict subset of its truth and ends at most this far above the noise (excess_ratio) misses
+# only effects its data do not ask for: the final twin without them already fits every state to the noise (a weak
+# shell that E absorbs). Chosen on the generative dev seeds 0-1: their exact runs end at <= 1.055x but one.
+QUIET_EXCESS = 1.06
 
 
 def _share(flags) -> float:
@@ -25,6 +29,12 @@ def _share(flags) -> float:
 def exact(r: Mapping) -> bool:
     """The loop named the injected in-list set, no more and no less (`unexplained` aside)."""
     return set(r["named"]) == set(r["injected_effects"])
+
+
+def quiet_miss(r: Mapping) -> bool:
+    """Not exact, but every miss is one the data do not ask for (QUIET_EXCESS): a subset named, residual at noise."""
+    named, truth = set(r["named"]), set(r["injected_effects"])
+    return named < truth and r["excess_ratio"] is not None and r["excess_ratio"] <= QUIET_EXCESS
 
 
 def power_floor_px(noise_px: float, gate_fit_rel: float) -> float:
@@ -47,6 +57,8 @@ def split_summary(rows: list[dict], floor_px: float) -> dict:
         "exact_named_by_n": {n: _share(exact(r) for r in inl if r["n_effects"] == n)
                              for n in sorted({r["n_effects"] for r in inl})},
         "exact_and_clean": _share(exact(r) and not r["unexplained"] for r in inl),
+        # a diagnostic beside the measure, not a replacement: misses the final residual does not ask for
+        "exact_or_quiet_miss": _share(exact(r) or quiet_miss(r) for r in inl),
         "mae_cut_mean": float(np.mean(cut)) if cut else NAN,
         "unexplained_on_exact": int(sum(exact(r) and r["unexplained"] for r in inl)),
         "in_list_unexplained": int(sum(r["unexplained"] for r in inl)),
@@ -57,9 +69,20 @@ def split_summary(rows: list[dict], floor_px: float) -> dict:
         "out_of_list_no_extra": _share(set(r["named"]) <= set(r["injected_effects"]) for r in out),
         "out_of_list_unexplained_by_kind": {k: _share(r["unexplained"] for r in out if k in r["unlisted"])
                                             for k in kinds},
+        "by_effect": by_effect(inl),
         "redrawn": int(sum(r["redrawn"] > 0 for r in rows)),
         "seeds": sorted({r["seed"] for r in rows}),
     }
+
+
+def by_effect(inl: list[dict]) -> dict[str, dict[str, int]]:
+    """Per in-list effect over in-list runs: how often it was injected, named where injected, and named where not
+    (spurious). Where the misses and spurious names lie, which the set-level share hides."""
+    effects = sorted({e for r in inl for e in [*r["injected_effects"], *r["named"]]})
+    return {e: {"injected": sum(e in r["injected_effects"] for r in inl),
+                "found": sum(e in r["injected_effects"] and e in r["named"] for r in inl),
+                "spurious": sum(e in r["named"] and e not in r["injected_effects"] for r in inl)} for e in effects}
+
 
 
 def summary(rows: list[dict], noise_px: float, gate_fit_rel: float) -> dict:
@@ -95,13 +118,17 @@ def markdown(rows: list[dict], summ: Mapping, meta: Mapping) -> str:
                   f"* in-list runs ({s['in_list_runs']}): exact set named **{_pct(s['exact_named'])}** (by count of "
                   f"effects: {by_n or 'n/a'}); three-effect runs **{_pct(s['exact_named_3'])}**; exact and not "
                   f"`unexplained` {_pct(s['exact_and_clean'])}",
+                  f"* exact, or missing only effects the final residual does not ask for (a subset named, "
+                  f"excess <= {QUIET_EXCESS}x the noise): {_pct(s['exact_or_quiet_miss'])}",
                   f"* mean MAE cut on in-list runs: **{_pct(s['mae_cut_mean'])}**",
                   f"* `unexplained` on runs whose exact set was named: **{s['unexplained_on_exact']}** (on any in-list "
                   f"run: {s['in_list_unexplained']}); in-list runs below the gate's power: {s['below_power']}",
                   f"* outside runs ({s['out_of_list_runs']}): `unexplained` **{_pct(s['out_of_list_unexplained'])}** "
                   f"({by_kind or 'n/a'}); no physical effect named beyond the in-list truth "
                   f"**{_pct(s['out_of_list_no_extra'])}**",
-                  f"* runs redrawn (their twin diverged): {s['redrawn']}", ""]
+                  f"* runs redrawn (their twin diverged): {s['redrawn']}",
+                  "* per effect on in-list runs (named where injected; named where not): " + ", ".join(
+                      f"{e} {v['found']}/{v['injected']}, spurious {v['spurious']}" for e, v in s["by_effect"].items()), ""]
     lines += ["## Runs", "", "| " + " | ".join(COLUMNS[:8]) + " |", "|" + "---|" * 8]
     for r in rows:
         lines.append("| " + " | ".join(_num(r[c]) if c.endswith(("_px", "_ratio")) else str(r[c])
