@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import copy
 import logging
-from typing import Mapping
+from typing import Callable, Mapping
 
 from palpation.loop.effects import EFFECTS, PARAMS
 from palpation.loop.gate import heldout_z
@@ -60,12 +60,12 @@ def _z(p, q, heldout: bool) -> float:
                      [p.markers[i] for i in ix])["z"]
 
 
-def needed(problems: list, simulate, limits: Mapping[str, Mapping | None], iters: int, z_crit: float
-           ) -> tuple[dict, dict]:
-    """Per problem, per added effect: {"z_off": z at the final parameters, "z_refit": z after re-fitting the rest
-    (None where step 1 settled it), "needed": bool}; and the problem without each effect with what that took out,
-    {(name, effect): (copy, effects)}."""
-    tests = [(p, e, without(p, removal_set(p, e))) for p in problems for e in added_effects(p)]
+def needed(problems: list, simulate, limits: Mapping[str, Mapping | None], iters: int, z_crit: float,
+           judged: Callable[[object], list[str]] = added_effects) -> tuple[dict, dict]:
+    """Per problem, per judged effect (default: the added ones): {"z_off": z at the final parameters, "z_refit": z
+    after re-fitting the rest (None where step 1 settled it), "needed": bool}; and the problem without each effect
+    with what that took out, {(name, effect): (copy, effects)}."""
+    tests = [(p, e, without(p, removal_set(p, e))) for p in problems for e in judged(p)]
     if not tests:
         return {}, {}
     diverged = evaluate([q for _, _, q in tests], simulate, strict=False)

@@ -212,9 +212,17 @@ def test_resume_skips_finished_runs_and_the_csv_has_exactly_the_columns(tmp_path
     rows = run(cfg)
     assert calls == [["dev_seed0_run0", "dev_seed0_run1"], ["dev_seed0_run2", "dev_seed0_run3"], ["dev_seed0_run4"]]
     assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == [f"dev_seed0_run{r}.json" for r in range(5)]
+    # every in-list run carries the oracle's truth (the toy twin moves no marker with an effect: none identifiable)
+    assert all(r["identifiable"] == [] for r in rows if not r["unlisted"]) and all(
+        "identifiable" not in r for r in rows if r["unlisted"])
     timing = json.loads((tmp_path / "timing.json").read_text())  # one entry per batch, apart from the run records
     assert [b["runs"] for b in timing] == calls and all(b["wall_s"] >= 0 for b in timing)
     calls.clear()
+    old = tmp_path / "runs" / "dev_seed0_run2.json"  # a record saved before the oracle is completed on resume
+    record = json.loads(old.read_text())
+    assert "identifiable" in record  # an in-list run
+    old.write_text(json.dumps({k: v for k, v in record.items() if k not in ("identifiable", "oracle")}))
+    assert run(cfg) == rows and calls == []  # ... without running its loop again
     (tmp_path / "runs" / "dev_seed0_run3.json").unlink()
     assert run(cfg) == rows and calls == [["dev_seed0_run3"]]  # only the missing run is made again, identically
     calls.clear()

@@ -40,6 +40,7 @@ from palpation.loop.generative_config import SPLITS, TEST_SEED_START
 from palpation.loop.inputs import Target
 from palpation.loop.selftest.fixed import (Injection, base_for, loop_on_sets, make_sets, simulate_injections,
                                            switch_on)
+from palpation.loop.selftest.oracle import identifiable
 from palpation.measured import MeasuredState
 
 log = logging.getLogger(__name__)
@@ -143,8 +144,10 @@ def saved(runs_dir: Path, fp: str) -> dict[str, dict]:
     return out
 
 
-def record(inj: Injection, seed: int, row: dict, fitted: Mapping[str, float], fp: str) -> dict:
-    """One finished run: the CSV row (COLUMNS) and what the summary reads."""
+def record(inj: Injection, seed: int, row: dict, fitted: Mapping[str, float], fp: str,
+           oracle: Mapping | None = None) -> dict:
+    """One finished run: the CSV row (COLUMNS), what the summary reads and, for an in-list run, the oracle's
+    identifiable truth (loop.selftest.oracle)."""
     keys = truth_keys(inj)  # the fitted side also gives every named effect's parameters (a spurious one's too)
     named = list(dict.fromkeys([*keys, *(n for e in row["named"] for n in EFFECTS[e].params)]))
     out = {"run": inj.run, "seed": seed, "split": split_of(seed), "effects_injected": inj.label or "none",
@@ -154,7 +157,21 @@ def record(inj: Injection, seed: int, row: dict, fitted: Mapping[str, float], fp
                                   "redrawn", "tries")}
     # what the rounds kept before loop.parsimony took out what the final twin does not need (both verdicts kept)
     detail.update({k: row[k] for k in ("named_by_rounds", "parsimony") if k in row})
-    return {"fingerprint": fp, **out, **detail, "n_effects": len(inj.effects)}
+    return {"fingerprint": fp, **out, **detail, "n_effects": len(inj.effects), **judged(inj, oracle)}
+
+
+def judged(inj: Injection, oracle: Mapping | None) -> dict:
+    """The oracle's fields of a run's record: none for an outside run, an empty truth for a run with none."""
+    if inj.unlisted:
+        return {}
+    if not inj.effects:
+        return {"identifiable": [], "oracle": {}}
+    return {"identifiable": oracle["identifiable"], "oracle": oracle["tests"]} if oracle else {}
+
+
+def needs_oracle(rec: Mapping) -> bool:
+    """A saved in-list run from before the oracle (its record is completed on resume: loop.selftest.oracle)."""
+    return "identifiable" not in rec and not rec["unlisted"]
 
 
 def log_batch(path: Path, fp: str, tags: list[str], wall_s: float) -> None:
@@ -194,12 +211,39 @@ def run_generative(cfg: LoopConfig, simulate, base: Mapping[str, float], templat
             inj.rest = rest_of(inj.params) if rest_of else None
         paths = make_sets(injections, markers, template, g.noise_px, None, out_dir / "sets", geometry, rest_px)
         rows, problems = loop_on_sets(cfg, injections, paths, simulate, base, db_path, tkey, g.max_rounds, progress)
+        oracle = identifiable(cfg, injections, paths, simulate, base)
         for inj, row, p in zip(injections, rows, problems):
-            save_json(runs_dir / f"{inj.tag}.json", record(inj, seed_of[inj.tag], row, p.params, fp))
+            save_json(runs_dir / f"{inj.tag}.json", record(inj, seed_of[inj.tag], row, p.params, fp,
+                                                           oracle.get(inj.tag)))
         log_batch(out_dir / "timing.json", fp, [inj.tag for inj in injections], time.perf_counter() - start)
         log.info("generative self-test: runs %s saved", [inj.tag for inj in injections])
+    backfill_oracle(cfg, simulate, base, template, geometry, rest_px, out_dir, fp, rest_of, size)
     order = {s: i for i, s in enumerate(SPLITS)}
     return sorted(saved(runs_dir, fp).values(), key=lambda r: (order[r["split"]], r["seed"], r["run"]))
+
+
+def backfill_oracle(cfg: LoopConfig, simulate, base: Mapping[str, float], template: list[Target],
+                    geometry: Mapping[str, MeasuredState], rest_px: np.ndarray, out_dir: Path, fp: str,
+                    rest_of, size: int) -> None:
+    """Complete saved in-list runs made before the oracle: each set is re-made from its seed (the twin on this
+    device; a set made on another differs by the device's floats) and its truth judged; the loop is not re-run."""
+    runs_dir = out_dir / "runs"
+    stale = [r for r in saved(runs_dir, fp).values() if needs_oracle(r)]
+    if stale:
+        log.info("generative self-test: %d saved runs get the identifiability oracle", len(stale))
+    for i in range(0, len(stale), size):
+        chunk = stale[i:i + size]
+        seed_of = {tag(r["seed"], r["run"]): r["seed"] for r in chunk}
+        injections = [draw(cfg, base, r["seed"], r["run"], r["redrawn"]) for r in chunk]  # the draw it was made of
+        markers = simulate_injections(injections, template, simulate, cfg, base,
+                                      lambda inj, attempt: draw(cfg, base, seed_of[inj.tag], inj.run, attempt))
+        for inj in injections:
+            inj.rest = rest_of(inj.params) if rest_of else None
+        paths = make_sets(injections, markers, template, cfg.generative.noise_px, None, out_dir / "sets", geometry,
+                          rest_px)
+        oracle = identifiable(cfg, injections, paths, simulate, base)
+        for inj, rec in zip(injections, chunk):
+            save_json(runs_dir / f"{inj.tag}.json", {**rec, **judged(inj, oracle.get(inj.tag))})
 
 
 def rows_csv(records: list[dict]) -> str:

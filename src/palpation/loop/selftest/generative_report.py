@@ -59,6 +59,11 @@ def split_summary(rows: list[dict], floor_px: float) -> dict:
         "exact_and_clean": _share(exact(r) and not r["unexplained"] for r in inl),
         # a diagnostic beside the measure, not a replacement: misses the final residual does not ask for
         "exact_or_quiet_miss": _share(exact(r) or quiet_miss(r) for r in inl),
+        # against the oracle's identifiable truth (loop.selftest.oracle), on the in-list runs that have it
+        "oracle_runs": sum("identifiable" in r for r in inl),
+        "exact_identifiable": _share(set(r["named"]) == set(r["identifiable"]) for r in inl if "identifiable" in r),
+        "not_identifiable": dict(Counter(e for r in inl if "identifiable" in r for e in r["injected_effects"]
+                                         if e not in r["identifiable"])),
         "mae_cut_mean": float(np.mean(cut)) if cut else NAN,
         "unexplained_on_exact": int(sum(exact(r) and r["unexplained"] for r in inl)),
         "in_list_unexplained": int(sum(r["unexplained"] for r in inl)),
@@ -120,6 +125,9 @@ def markdown(rows: list[dict], summ: Mapping, meta: Mapping) -> str:
                   f"`unexplained` {_pct(s['exact_and_clean'])}",
                   f"* exact, or missing only effects the final residual does not ask for (a subset named, "
                   f"excess <= {QUIET_EXCESS}x the noise): {_pct(s['exact_or_quiet_miss'])}",
+                  f"* against the identifiable truth (the oracle: each injected effect is needed by its data at the "
+                  f"true parameters; {s['oracle_runs']} runs judged): exact {_pct(s['exact_identifiable'])}; not "
+                  "identifiable: " + (", ".join(f"{e} {n}" for e, n in sorted(s["not_identifiable"].items())) or "none"),
                   f"* mean MAE cut on in-list runs: **{_pct(s['mae_cut_mean'])}**",
                   f"* `unexplained` on runs whose exact set was named: **{s['unexplained_on_exact']}** (on any in-list "
                   f"run: {s['in_list_unexplained']}); in-list runs below the gate's power: {s['below_power']}",
