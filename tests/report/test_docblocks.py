@@ -1,5 +1,6 @@
 """The numbers in README.md and docs/*.md are their records' (report.docblocks, report.docnumbers)."""
 
+import json
 import re
 import shutil
 from pathlib import Path
@@ -89,3 +90,14 @@ def test_a_markdown_record_without_its_line_is_an_error(tmp_path):
     report.write_text(report.read_text().replace("the rest is", "the remainder is"))
     with pytest.raises(ValueError, match="the rest is N× the noise"):
         docblocks.run(root)
+
+
+def test_a_changed_silicone_check_makes_the_maps_page_stale(tmp_path):
+    root = repo_copy(tmp_path)
+    record = root / "docs" / "results" / "paper" / "maps" / "silicone_pose_check.json"
+    data = json.loads(record.read_text())
+    data["mirror"]["m"] = 15.0  # the step is 60 / m
+    record.write_text(json.dumps(data))
+    assert [s.key for s in docblocks.run(root)] == ["maps.silicone.mirror", "maps.silicone.step"]
+    docblocks.run(root, write=True)
+    assert "<!-- gen:maps.silicone.step -->4.00 mm<!-- /gen -->" in (root / "docs" / "maps.md").read_text()
