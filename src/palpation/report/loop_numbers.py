@@ -229,3 +229,16 @@ def general_wall(results: Path, log_name: str) -> str:
     saved = [(datetime.fromisoformat(t), runs.count("'") // 2) for t, runs in stamps[1:] if runs]
     end, n = saved[0]
     return f"{n} runs in {(end - start).total_seconds():.0f} s"
+
+
+def general_oracle(results: Path, md_name: str) -> str:
+    """The exact set against the oracle's identifiable truth, as the self-test's page states it (only the page and
+    the JSON hold the oracle: the CSV keeps the issue's columns)."""
+    text = read_text(results / md_name, FIX, "record")
+    found = re.findall(r"^\* against the identifiable truth .*?; (\d+) runs judged\): exact (\d+%); not identifiable: "
+                       r"(.*)$", text, re.M)
+    if len(found) != 1:
+        raise ValueError(f"record {results / md_name}: no single 'against the identifiable truth' line; make the "
+                         "page again with the oracle (resume the self-test)")
+    runs, exact, missing = found[0]
+    return f"exact {exact.replace('%', ' %')} of {runs} judged runs (not identifiable: {missing})"
