@@ -62,12 +62,18 @@ def test_doc_has_no_diary_marks(doc):
 # --- Measured figures come from records: a figure of a run (a wall time, a score, an agreement in px) stated in the
 # prose must sit in a `<!-- gen:KEY -->` block filled from docs/results/ (palpation.report.docblocks); a figure with
 # no record goes to docs/journal/ with a pointer left behind. A conservative heuristic: durations (s, min, ms, h),
-# AUROC / AP / ECE / d̄ with a decimal, and "agree ... N.NN px". Percentages and mm are not checked (settings and
-# SPEC facts use them throughout); scientific notation (dt = 1e-5 s) is a setting and is not matched.
+# AUROC / AP / ECE / d̄ with a decimal, "agree ... N.NN px", a change "N → M" ending in %, px, mm, MPa or kPa, and a
+# decimal or approximate (~N) px / mm / MPa / kPa on a line that reads as a result (before, after, now, got, reached,
+# measured, gave, sits, against, →). Other percentages and mm are not checked (settings and SPEC facts use them
+# throughout); scientific notation (dt = 1e-5 s) is a setting and is not matched.
 DURATION = re.compile(r"(?<![\w.\-−/^])\d+(?:[.,]\d+)?(?:\s*[-–]\s*\d+(?:\.\d+)?)?\s?"
                       r"(?:s|ms|min|minutes?|seconds?|h|hours?)\b(?![/\w])")
 SCORE = re.compile(r"\b(?:AUROC|AP|ECE|d̄)\s*[=:≈]?\s*\d*\.\d+")
 AGREEMENT = re.compile(r"\bagree(?:s|d|ment)?\b[^.;()\n]{0,40}?(?<![\w.\-])~?\d*\.?\d+\s*px")
+UNITS = r"(?:px|mm|MPa|kPa)"
+CHANGE = re.compile(rf"(?<![\w.])~?\d+(?:\.\d+)?\s*(?:%|{UNITS})?\s*→\s*~?\d+(?:\.\d+)?\s*(?:%|{UNITS})(?!\w)")
+RESULT_CUE = re.compile(r"\b(?:before|after|now|got|reached|measured|gave|gives|sits?|against)\b|→", re.I)
+RESULT_FIGURE = re.compile(rf"(?<![\w.\-−/])(?:~\d+(?:\.\d+)?|\d+\.\d+)\s?{UNITS}(?!\w)")  # on a RESULT_CUE line
 GEN_BLOCK = re.compile(r"<!-- gen:[\w.\-]+ -->.*?<!-- /gen -->", re.S)
 # Typed figures that are no run's result, each with why (doc name, the exact text; the rest of its line is checked).
 SETTINGS = {
@@ -84,7 +90,11 @@ SETTINGS = {
     ("DEVELOPING.md", "within 2000 frames of 0.5 s; a frame time far above the reference 0.00124 s"):
         "an error message quoted verbatim (a configured frame time, the reference's frame time)",
     ("calibration.md", "replays agree to ~0.04 px, quirk 26"): "SPEC's quirk 26, a fact of the reference",
-    ("twin.md", "E(37 ms)"): "the energy test's time point, a setting",
+    ("loop.md", "sits within ~2 px of a sensor that never deforms (SPEC quirk 2)"): "SPEC's quirk 2, the reference's",
+    ("loop.md", "`shell_thickness_mm` (1.5 mm)"): "a config default (the table's other column reads 'ratio 1 → 2')",
+    ("loop.md", "(SPEC §13.2's 0.2 px)"): "SPEC's detector noise, a fact of the reference",
+    ("measured_format.md", "SPEC §13.6: radius ~2 mm"): "SPEC's vessel radius, a fact of the reference",
+    ("twin.md", "(3.2 mm deep, then held)"): "the press's depth, a setting of the run described",
     ("twin.md", "123 steps = 1.23 ms"): "the frame length a setting implies",
     ("twin.md", "within the aim of 0.01 px"): "an aim, not a result",
 }
@@ -98,8 +108,12 @@ def typed_figures(text: str, doc: str = "") -> list[str]:
         for (name, allowed), _why in SETTINGS.items():
             if name == doc:
                 line = line.replace(allowed, " ")
-        found += [f"line {number}: {m.group(0)!r}" for pattern in (DURATION, SCORE, AGREEMENT)
+        found += [f"line {number}: {m.group(0)!r}" for pattern in (DURATION, SCORE, AGREEMENT, CHANGE)
                   for m in pattern.finditer(line)]
+        if RESULT_CUE.search(line):  # a figure already inside a found change is not counted twice
+            changes = [m.span() for m in CHANGE.finditer(line)]
+            found += [f"line {number}: {m.group(0)!r}" for m in RESULT_FIGURE.finditer(line)
+                      if not any(a <= m.start() < b for a, b in changes)]
     return found
 
 
@@ -114,6 +128,21 @@ def test_typed_figures_are_found_and_settings_are_not():
                                    "line 2: 'AUROC 0.741'", "line 2: 'AP 0.32'", "line 2: 'd̄ 2.1'",
                                    "line 2: 'agree to 0.0018 px'", "line 4: '0.5 s'"]
     assert typed_figures(text, "loop.md")[-1] == "line 2: 'agree to 0.0018 px'"  # the allowed phrase, in its doc
+
+
+def test_typed_changes_and_result_figures_are_found_and_settings_are_not():
+    text = ("The fix took the marker MAE 6.46 px → 1.40 px and the exact rate 72 → 84 %.\n"
+            "A glint drags the centre (~6 px before, < 1 px now); a static offset (~13 px against ~1.5 px of motion).\n"
+            "Stability: E·ratio below ~4.5 MPa, a 1.5 mm shell, 4 mm bins, ratio 1 to 2, 0.2 px noise, radius ~2 mm.\n"
+            "It <!-- gen:twin.binding -->sits 6.46 px<!-- /gen --> off; the E sweep measured 13.87 MPa.\n")
+    assert typed_figures(text) == ["line 1: '6.46 px → 1.40 px'", "line 1: '72 → 84 %'", "line 2: '~6 px'",
+                                   "line 2: '~13 px'", "line 2: '~1.5 px'", "line 4: '13.87 MPa'"]
+
+
+def test_a_typed_marker_change_in_a_doc_is_caught(tmp_path):
+    loop = (REPO_ROOT / "docs" / "loop.md").read_text()
+    edited = loop.replace("## Limitations", "The anchor took the MAE 6.46 px → 1.40 px.\n\n## Limitations", 1)
+    assert [f.split(": ", 1)[1] for f in typed_figures(edited, "loop.md")] == ["'6.46 px → 1.40 px'"]
 
 
 def test_a_typed_wall_time_in_a_doc_is_caught(tmp_path):

@@ -209,8 +209,9 @@ def test_reference_centroid_rule_option(mesh):
     assert not sim.failed().any()
 
 
-def test_mass_scale_25_equals_the_reference_x5_length_scale(mesh):
-    """docs/twin.md: a x5-length run with unscaled E, rho, k_n, c_n, alpha is mass_scale 25 in SI."""
+def mass_scale_pair(mesh):
+    """The coarse sensor x5 with the reference's own coefficients and the SI model (mass_scale 25), both pressed
+    2.7 mm into the vessel; returns (x5 twin, SI twin). Also run by workflow/scripts/twin_verification.py."""
     import dataclasses
 
     ref = TwinConfig()  # x5 lengths, reference coefficients, real masses of the scaled body
@@ -228,6 +229,12 @@ def test_mass_scale_25_equals_the_reference_x5_length_scale(mesh):
     for Tb, Tp in zip(scaled[1:], poses[1:]):
         big.step_frame(Tb[None])
         phys.step_frame(Tp[None])
+    return big, phys
+
+
+def test_mass_scale_25_equals_the_reference_x5_length_scale(mesh):
+    """docs/twin.md: a x5-length run with unscaled E, rho, k_n, c_n, alpha is mass_scale 25 in SI."""
+    big, phys = mass_scale_pair(mesh)
     assert phys.contact_flags()[0] and big.contact_flags()[0]
     deflection = np.abs(phys.positions_world() - phys.undeformed_world()).max()
     # equal up to float32 round-off, which the contact amplifies to ~1e-3 of the deflection
