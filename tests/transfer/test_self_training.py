@@ -1,4 +1,4 @@
-"""Self-training on agreed pseudo-labels (recipe.pseudo, transfer.self_training): the masked loss, the
+"""Self-training on agreed pseudo-labels (recipe.pseudo, model.self_training): the masked loss, the
 pseudo-labelled clips, the scored set's labels never read, and the option off by default."""
 
 import json
@@ -13,8 +13,8 @@ from palpation.io import save_json, save_npz
 from palpation.metrics.scores import Scores, save_scores
 from palpation.model.train import coded_targets, focal_loss, masked_focal_loss, pseudo_focal_loss
 from palpation.readers import read_npz
-from palpation.transfer.pseudo import agreed_labels
-from palpation.transfer.self_training import pseudo_clips
+from palpation.model.pseudo_labels import agreed_labels
+from palpation.model.self_training import pseudo_clips
 
 from tests.apps.test_train_app import TINY, compose_train
 
@@ -159,7 +159,8 @@ def test_off_by_default_and_bad_settings_refused(train_sets, tmp_path):
         t = job_from_config(compose_train([f"recipe={recipe}"])).train
         assert (t.pseudo, t.pseudo_from, t.pseudo_weight) == ("none", None, 1.0)
     m = run(compose_train(["experiment=A-to-B", "seed=0", *_base(train_sets)]), tmp_path / "ref")
-    assert "pseudo_labels" not in m and "pseudo_labels" not in json.loads((tmp_path / "ref" / "metrics.json").read_text())
+    saved = json.loads((tmp_path / "ref" / "metrics.json").read_text())
+    assert "pseudo_labels" not in m and "pseudo_labels" not in saved
     with pytest.raises(ValueError, match="give both"):
         job_from_config(compose_train(["recipe.pseudo=other_real"]))
     with pytest.raises(Exception, match="pseudo_margin"):

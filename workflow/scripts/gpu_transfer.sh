@@ -23,7 +23,8 @@ jobs_n=${JOBS:-3} python=${PYTHON:-python3} clip_len=${CLIP_LEN:-5}
 pythonpath=${PYTHONPATH:-}
 export PYTHONPATH="$PWD/src${pythonpath:+:$pythonpath}" PYTHONUNBUFFERED=1
 commands() {  # the pending trainings of a stage, one shell line each
-  "$python" "$here/transfer_commands.py" --methods "$methods" --runs-root "$runs" --seeds $seeds --clip-len "$clip_len" \
+  "$python" "$here/transfer_commands.py" --methods "$methods" --runs-root "$runs" --seeds $seeds \
+    --clip-len "$clip_len" \
     --device "${DEVICE:-cuda}" --python "$python" --extra "${EXTRA:-}" --pending --logs "$out/logs" --stage "$1"
 }
 

@@ -96,7 +96,7 @@ class TrainConfig:
     select_on: str = "val"
     # self-training (docs/transfer.md): the unlabelled clips of `pseudo` (other_real: the other real set, inductive;
     # test_set: the scored set's own, transductive) join the training set, pseudo-labelled where the teacher runs
-    # in `pseudo_from` (one scores.npz per seed) agree (transfer.pseudo.agreed_labels); their loss weighs
+    # in `pseudo_from` (one scores.npz per seed) agree (model.pseudo_labels.agreed_labels); their loss weighs
     # pseudo_weight, markers without an agreed label weigh 0
     pseudo: str = "none"
     pseudo_from: str | None = None
@@ -120,7 +120,8 @@ class TrainConfig:
             raise ValueError(f"patience must be >= 1 epoch or null (off), got {self.patience}")
         if (self.pseudo == "none") != (self.pseudo_from is None):
             raise ValueError(f"recipe.pseudo={self.pseudo} with recipe.pseudo_from={self.pseudo_from}: give both (a "
-                             "teacher runs folder and other_real or test_set) or neither (pseudo=none, pseudo_from=null)")
+                             "teacher runs folder and other_real or test_set) or neither (pseudo=none, "
+                             "pseudo_from=null)")
         if not 0.5 < self.pseudo_min_agree <= 1 or not 0 <= self.pseudo_margin < 0.5 or self.pseudo_weight <= 0:
             raise ValueError(f"recipe.pseudo_min_agree={self.pseudo_min_agree} must be in (0.5, 1], pseudo_margin="
                              f"{self.pseudo_margin} in [0, 0.5) and pseudo_weight={self.pseudo_weight} > 0")

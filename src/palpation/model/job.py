@@ -38,7 +38,7 @@ from palpation.model.stgnn import count_parameters
 from palpation.model.restarts import fit_restarts, fit_seeds_restarts
 from palpation.model.stacked import predict_seeds
 from palpation.model.train import FitResult
-from palpation.transfer.self_training import with_pseudo_clips
+from palpation.model.self_training import with_pseudo_clips
 
 log = logging.getLogger(__name__)
 OUTPUTS = ("metrics.json", "scores.npz", "pr.npz", "checkpoint.pt")

@@ -1,5 +1,5 @@
 """The training set of a self-training run (`recipe.pseudo`, docs/transfer.md): the training domain's clips plus
-a real set's unlabelled clips, pseudo-labelled where the teacher runs' seeds agree (transfer.pseudo).
+a real set's unlabelled clips, pseudo-labelled where the teacher runs' seeds agree (model.pseudo_labels).
 
 Whose clips: `other_real`, the labelled real set other than the scored one (inductive: a model scored on Silicone
 self-trains on Meat's inputs), or `test_set`, the scored set's own inputs (transductive). Either way only the set's
@@ -25,7 +25,7 @@ from palpation.graph.sources import load_dataset
 from palpation.metrics.scores import load_scores
 from palpation.model.domain import REAL_SETS, other_real_set
 from palpation.readers import read_json
-from palpation.transfer.pseudo import ensemble_pseudo_labels
+from palpation.model.pseudo_labels import ensemble_pseudo_labels
 
 log = logging.getLogger(__name__)
 FIX = "train the teacher method first (docs/transfer.md, the two-stage commands) or fix recipe.pseudo_from"
@@ -60,8 +60,8 @@ def teacher_runs(root: str | Path, set_name: str, train_on: str, clip_len: int) 
     found = {}
     for folder in folders:
         seeds = _seed_dirs(folder)
-        meta = [read_json(s / "metrics.json", FIX, "teacher run", kind=dict, keys=("test_on", "train_on", "clip_len"))
-                for s in seeds]
+        meta = [read_json(s / "metrics.json", FIX, "teacher run", kind=dict,
+                          keys=("test_on", "train_on", "clip_len")) for s in seeds]
         if seeds and all(m["test_on"] == set_name and m["clip_len"] == clip_len for m in meta):
             found[folder] = (seeds, {m["train_on"] for m in meta})
     if len(found) > 1:
