@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from palpation.metrics.scores import Scores
-from palpation.transfer.pseudo import agreed_labels, ensemble_pseudo_labels
+from palpation.model.pseudo_labels import agreed_labels, ensemble_pseudo_labels
 
 
 def test_only_agreed_labels_are_kept():

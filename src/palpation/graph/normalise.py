@@ -15,6 +15,7 @@ from typing import Iterable
 import numpy as np
 
 from palpation.graph.features import ClipFeatures
+from palpation.graph.pseudo import label_counts
 
 N_SCALED = 3
 GROUPS = ("node", "spatial", "temporal")
@@ -28,7 +29,7 @@ class NormStats:
     spatial_std: tuple
     temporal_mean: tuple
     temporal_std: tuple
-    alpha: float  # N_neg / (N_neg + N_pos) over every marker of every frame of the clips
+    alpha: float  # N_neg / (N_neg + N_pos) over every labelled marker of every frame of the clips
     n_clips: int
     mode: str
     remove_common_motion: bool = False  # the features' input transform (graph.features), kept with the statistics
@@ -46,11 +47,16 @@ class NormStats:
             for g, arr in zip(GROUPS, (feats.x, feats.spatial, feats.temporal)):
                 cols = arr[..., :N_SCALED].reshape(-1, N_SCALED).astype(np.float64)
                 sums[g] += [np.full(N_SCALED, len(cols)), cols.sum(0), (cols ** 2).sum(0)]
-            n_pos += int(np.count_nonzero(labels))
-            n_all += int(np.size(labels))
+            pos, labelled = label_counts(labels)  # pseudo-label codes: unlabelled markers not counted
+            n_pos += pos
+            n_all += labelled
             n_clips += len(feats.x)
-        if n_all == 0:
+        if n_clips == 0:
             raise ValueError("normalisation statistics need at least one training clip; got none")
+        if n_all == 0:  # only with pseudo-labels: every marker of the drawn clips without an agreed label
+            raise ValueError(f"the focal alpha needs labelled markers; the {n_clips} normalisation clips have none "
+                             "(pseudo-labelled clips without agreed labels): use recipe.norm_stats=full or a laxer "
+                             "recipe.pseudo_min_agree / pseudo_margin")
         out = {}
         for g in GROUPS:
             count, total, squares = sums[g]

@@ -50,9 +50,11 @@ Calibration = StrEnum("Calibration", {m: m for m in ("none", "temperature", "pla
 Align = StrEnum("Align", {m: m for m in ALIGN_METHODS})
 AlignStats = StrEnum("AlignStats", {m: m for m in ALIGN_STATS})
 SelectOn = StrEnum("SelectOn", {m: m for m in ("val", "other_real")})
+Pseudo = StrEnum("Pseudo", {m: m for m in ("none", "other_real", "test_set")})
 DATASETS = ("sim", "silicone", "meat")  # train_on / test_on: the sets graph.sources.load_dataset reads
 CHOICES = {"norm_stats": NormStats, "rotation": Rotation, "schedule": Schedule, "select_metric": SelectMetric,
-           "calibration": Calibration, "align": Align, "align_stats": AlignStats, "select_on": SelectOn}
+           "calibration": Calibration, "align": Align, "align_stats": AlignStats, "select_on": SelectOn,
+           "pseudo": Pseudo}
 
 
 @dataclass(frozen=True)
@@ -92,6 +94,15 @@ class TrainConfig:
     align: str = "none"
     align_stats: str = "other_real"
     select_on: str = "val"
+    # self-training (docs/transfer.md): the unlabelled clips of `pseudo` (other_real: the other real set, inductive;
+    # test_set: the scored set's own, transductive) join the training set, pseudo-labelled where the teacher runs
+    # in `pseudo_from` (one scores.npz per seed) agree (model.pseudo_labels.agreed_labels); their loss weighs
+    # pseudo_weight, markers without an agreed label weigh 0
+    pseudo: str = "none"
+    pseudo_from: str | None = None
+    pseudo_min_agree: float = 1.0
+    pseudo_margin: float = 0.0
+    pseudo_weight: float = 1.0
     restarts: int = 1  # starts per seed, the best on val kept (palpation.model.restarts); 1 = the seed alone
     threshold: float = 0.5
     device: str = "cpu"
@@ -107,6 +118,13 @@ class TrainConfig:
                              f"{self.jitter_px}, {self.marker_dropout}, {self.displacement_scale}")
         if self.patience is not None and self.patience < 1:
             raise ValueError(f"patience must be >= 1 epoch or null (off), got {self.patience}")
+        if (self.pseudo == "none") != (self.pseudo_from is None):
+            raise ValueError(f"recipe.pseudo={self.pseudo} with recipe.pseudo_from={self.pseudo_from}: give both (a "
+                             "teacher runs folder and other_real or test_set) or neither (pseudo=none, "
+                             "pseudo_from=null)")
+        if not 0.5 < self.pseudo_min_agree <= 1 or not 0 <= self.pseudo_margin < 0.5 or self.pseudo_weight <= 0:
+            raise ValueError(f"recipe.pseudo_min_agree={self.pseudo_min_agree} must be in (0.5, 1], pseudo_margin="
+                             f"{self.pseudo_margin} in [0, 0.5) and pseudo_weight={self.pseudo_weight} > 0")
         if self.batch_size < 1 or self.epochs < 1 or self.restarts < 1:
             raise ValueError(f"batch_size, epochs and restarts must be >= 1, got {self.batch_size}, {self.epochs}, "
                              f"{self.restarts}")
@@ -154,6 +172,11 @@ class RecipeSchema:
     align: Align = MISSING
     align_stats: AlignStats = MISSING
     select_on: SelectOn = MISSING
+    pseudo: Pseudo = MISSING
+    pseudo_from: Optional[str] = MISSING  # a teacher runs folder (docs/transfer.md); null with pseudo none
+    pseudo_min_agree: float = ranged(MISSING, Num(gt=0.5, le=1))
+    pseudo_margin: float = ranged(MISSING, Num(ge=0, lt=0.5))
+    pseudo_weight: float = ranged(MISSING, Num(gt=0))
     sizes: Dict[str, SizesSchema] = ranged(MISSING, DictOf(min_len=1))
 
 

@@ -38,13 +38,19 @@ from palpation.model.stgnn import count_parameters
 from palpation.model.restarts import fit_restarts, fit_seeds_restarts
 from palpation.model.stacked import predict_seeds
 from palpation.model.train import FitResult
+from palpation.model.self_training import with_pseudo_clips
 
 log = logging.getLogger(__name__)
 OUTPUTS = ("metrics.json", "scores.npz", "pr.npz", "checkpoint.pt")
 # the conf/recipe/ keys, which land in TrainConfig beside conf/train.yaml's `train:` section
 RECIPE_KEYS = ("lr", "weight_decay", "focal_gamma", "norm_stats", "norm_clips", "rotation", "schedule",
                "step_size", "step_gamma", "jitter_px", "marker_dropout", "displacement_scale", "patience",
-               "select_metric", "calibration", "remove_common_motion", "align", "align_stats", "select_on")
+               "select_metric", "calibration", "remove_common_motion", "align", "align_stats", "select_on",
+               "pseudo", "pseudo_from", "pseudo_min_agree", "pseudo_margin", "pseudo_weight")
+
+# the pseudo-labelled set depends on the scored set (the other real one, or its own), so no training serves two
+PSEUDO_APART = ("{}: recipe.pseudo self-trains on clips chosen by the scored set; train each configuration apart "
+                "(drop also_test)")
 
 
 @dataclass(frozen=True)
@@ -83,17 +89,19 @@ class JobData:
     train: ClipSet
     val: ClipSet
     test: ClipSet
+    pseudo: dict | None = None  # what the pseudo-labelled training clips were (recipe.pseudo), None when off
 
 
 def load_job_data(job: TrainJob) -> JobData:
     rest = rest_layout(job.rest)
     topo = clip_topology(spatial_edges(rest), job.clip_len)
     train = ClipSet(load_dataset(job.train_on, job.data[job.train_on], "train"), job.clip_len, rest)
+    train, pseudo = with_pseudo_clips(job, train, rest)  # unchanged unless recipe.pseudo is on
     val = ClipSet(selection_sequences(job), job.clip_len, rest)  # the training domain's val split unless select_on
     test = load_test_set(job, rest)
     log.info("%s L=%d: %d train / %d val / %d test clips", job.config_name, job.clip_len, len(train), len(val),
              len(test))
-    return JobData(rest, topo, train, val, test)
+    return JobData(rest, topo, train, val, test, pseudo)
 
 
 def load_test_set(job: TrainJob, rest: np.ndarray) -> ClipSet:
@@ -126,6 +134,8 @@ def run_job(job: TrainJob, out_dir: str | Path, params: dict | None = None, trac
                          "set; train with seeds=[...] and also_test=[<config>:<set>] (e.g. A-to-B with "
                          "also_test=[A-to-C:meat]), or use calibration=platt")
     others = list(also)
+    if others and job.train.pseudo != "none":
+        raise ValueError(PSEUDO_APART.format(job.config_name))
     if any(training_key(o) != training_key(job) or o.seed != job.seed or o.train != job.train for o, *_ in others):
         raise ValueError(f"also: configurations scored by {job.config_name}'s model must train alike (same seed, "
                          "training set, model and recipe); train the others apart")
@@ -186,6 +196,8 @@ def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: 
     if len(set(keys)) != len(jobs) or len(jobs) != len(seeds) * len(outputs):
         raise ValueError(f"jobs trained together need every seed {seeds} once with every (test set, calibration) "
                          f"{outputs}")
+    if len(tests) > 1 and first.train.pseudo != "none":
+        raise ValueError(PSEUDO_APART.format(first.config_name))
     partner = {j.config_name: cross_real_partner(j, tests) for j in jobs if j.train.calibration == "cross_real"}
     check_selection(jobs)
     d = load_job_data(first)
@@ -289,6 +301,7 @@ def finish_job(job: TrainJob, result: FitResult, d: JobData, out_dir: str | Path
         "device": device_name(job.train.device),
         **calibration,  # only with a calibration: the reference recipe's metrics.json is unchanged
         **transfer,  # only with a transfer option (docs/transfer.md)
+        **({"pseudo_labels": d.pseudo} if d.pseudo else {}),
         **(extra or {}),
     }
     save_scores(out_dir / "scores.npz", Scores(probs, labels, *test.central_frames()))

@@ -46,7 +46,7 @@ from palpation.model.config import ModelConfig, TrainConfig
 from palpation.model.evaluate import aligned_features, central_slice
 from palpation.model.stgnn import STGNN
 from palpation.model.train import (FitResult, epoch_row, focal_loss, grouped_parameters, norm_stats,
-                                   seed_everything, training_batch)
+                                   pseudo_focal_loss, pseudo_weight, seed_everything, training_batch)
 from palpation.progress import bar
 
 log = logging.getLogger(__name__)
@@ -204,7 +204,11 @@ def fit_seeds(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology
                                          on_gpu if batch_workers is None else batch_workers)
     stack = Stack(models)
 
+    weight = pseudo_weight(cfg)
+
     def seed_loss(logits, y, alpha):
+        if weight is not None:  # label codes with pseudo-labels (recipe.pseudo)
+            return pseudo_focal_loss(logits, y, alpha, cfg.focal_gamma, weight)
         return focal_loss(logits, y, alpha, cfg.focal_gamma)
 
     def prepare(i: int, order: np.ndarray, b: int):  # only seed i's own stream: threads are safe

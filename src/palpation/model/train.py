@@ -25,6 +25,7 @@ from palpation.graph.clips import ClipSet
 from palpation.graph.edges import ClipTopology
 from palpation.graph.features import clip_features
 from palpation.graph.normalise import NormStats
+from palpation.graph.pseudo import PSEUDO
 from palpation.metrics.classification import confusion, iou
 from palpation.model.config import ModelConfig, TrainConfig
 from palpation.model.evaluate import predict
@@ -56,14 +57,48 @@ def focal_loss(logits: torch.Tensor, targets: torch.Tensor, alpha: float, gamma:
     return (alpha_t * (1 - p_t) ** gamma * bce).mean()
 
 
+def masked_focal_loss(logits: torch.Tensor, targets: torch.Tensor, weight: torch.Tensor, alpha,
+                      gamma: float) -> torch.Tensor:
+    """The focal loss of each node weighted, summed over the nodes of nonzero weight and divided by their count: a
+    node of weight 0 adds nothing, whatever its target (its term is 0 and so is its gradient)."""
+    bce = torch.nn.functional.binary_cross_entropy_with_logits(logits, targets, reduction="none")
+    p = torch.sigmoid(logits)
+    p_t = p * targets + (1 - p) * (1 - targets)
+    alpha_t = alpha * targets + (1 - alpha) * (1 - targets)
+    return (weight * alpha_t * (1 - p_t) ** gamma * bce).sum() / (weight > 0).sum().clamp(min=1)
+
+
+def coded_targets(codes: torch.Tensor, pseudo_weight: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """Targets and weights of label codes (graph.pseudo): a label weighs 1, a pseudo-label `pseudo_weight`, a
+    marker without one 0 (its target set to 0, never read)."""
+    pseudo = codes >= PSEUDO
+    targets = torch.where(pseudo, codes - PSEUDO, codes).clamp(min=0)
+    weight = torch.where(codes < 0, 0.0, torch.where(pseudo, pseudo_weight, 1.0))
+    return targets, weight
+
+
+def pseudo_focal_loss(logits: torch.Tensor, codes: torch.Tensor, alpha, gamma: float,
+                      pseudo_weight: float) -> torch.Tensor:
+    """The training loss of a set with pseudo-labels (recipe.pseudo): masked_focal_loss of the codes."""
+    return masked_focal_loss(logits, *coded_targets(codes, pseudo_weight), alpha, gamma)
+
+
 def train_step(model: torch.nn.Module, opt: torch.optim.Optimizer, batch, alpha: float,
-               gamma: float) -> torch.Tensor:
-    """One optimisation step of `fit`: focal loss over every frame's marker nodes, backward, Adam; the loss."""
-    loss = focal_loss(model(batch), batch.y, alpha, gamma)
+               gamma: float, pseudo_weight: float | None = None) -> torch.Tensor:
+    """One optimisation step of `fit`: focal loss over every frame's marker nodes, backward, Adam; the loss.
+    `pseudo_weight`: the batch's `y` holds label codes (recipe.pseudo on): the masked loss of pseudo_focal_loss."""
+    logits = model(batch)
+    loss = focal_loss(logits, batch.y, alpha, gamma) if pseudo_weight is None \
+        else pseudo_focal_loss(logits, batch.y, alpha, gamma, pseudo_weight)
     opt.zero_grad()
     loss.backward()
     opt.step()
     return loss
+
+
+def pseudo_weight(cfg: TrainConfig) -> float | None:
+    """The pseudo-labels' loss weight when self-training is on, else None (the plain focal loss)."""
+    return None if cfg.pseudo == "none" else cfg.pseudo_weight
 
 
 def grouped_parameters(named, weight_decay: float) -> list[dict]:
@@ -172,7 +207,7 @@ def fit(train: ClipSet, val: ClipSet, rest: np.ndarray, topo: ClipTopology, mode
             idx = order[b * cfg.batch_size:(b + 1) * cfg.batch_size]
             m, lab = training_batch(train, idx, cfg, rng)
             batch = make_batch(m, lab, rest, topo, stats, cfg.device)
-            loss = train_step(model, opt, batch, stats.alpha, cfg.focal_gamma)
+            loss = train_step(model, opt, batch, stats.alpha, cfg.focal_gamma, pseudo_weight(cfg))
             losses.append(loss.item())
             step += 1
             if log_metrics:

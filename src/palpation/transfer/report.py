@@ -23,32 +23,42 @@ from palpation.transfer.selection import SELECTIONS, Run, choose, crossfit_by_tr
 
 COLUMNS = ("config", "method", "selection", "transductive", "chosen", "seeds", "ap_mean", "ap_std", "auroc_mean",
            "pos_share_05")
+CONFIGS = ("A-to-B", "A-to-C", "C-to-B")  # the transfer configurations (conf/experiment/)
 METHOD_KEYS = {"about": Text(), "transductive": Choice(True, False), "overrides": ListOf(Text(), 0)}
+OPTIONAL_KEYS = {"configs": ListOf(Choice(*CONFIGS), 1, unique=True)}  # default: every configuration
 
 
 def read_methods(path: str | Path) -> dict[str, dict]:
-    """conf/transfer/methods.yaml: `methods: {name: {about, transductive, overrides}}`; unknown keys refused."""
-    fix = f"edit {path} (docs/transfer.md: a method is about, transductive, overrides)"
+    """conf/transfer/methods.yaml: `methods: {name: {about, transductive, overrides[, configs]}}`; unknown keys
+    refused. `configs`: the configurations the method runs on (a self-trained student has no inductive C-to-B)."""
+    fix = f"edit {path} (docs/transfer.md: a method is about, transductive, overrides and optionally configs)"
     data = read_yaml(path, fix, "transfer methods")
     methods = data.get("methods") if set(data) == {"methods"} else None
     if not isinstance(methods, dict) or not methods:
         raise ValueError(f"{path}: one top-level key `methods`, a non-empty mapping of method names; {fix}")
     for name, spec in methods.items():
-        if not isinstance(spec, dict) or set(spec) != set(METHOD_KEYS):
-            raise ValueError(f"{path}: method {name!r} needs exactly the keys {sorted(METHOD_KEYS)}; {fix}")
-        for key, rule in METHOD_KEYS.items():
-            if rule.problem(spec[key]):
+        if not isinstance(spec, dict) or not set(METHOD_KEYS) <= set(spec) <= {*METHOD_KEYS, *OPTIONAL_KEYS}:
+            raise ValueError(f"{path}: method {name!r} needs exactly the keys {sorted(METHOD_KEYS)} (and optionally "
+                             f"{sorted(OPTIONAL_KEYS)}); {fix}")
+        for key, rule in {**METHOD_KEYS, **OPTIONAL_KEYS}.items():
+            if key in spec and rule.problem(spec[key]):
                 raise ValueError(f"{path}: methods.{name}.{key}={spec[key]!r}: need {rule.describe()}; {fix}")
     return methods
 
 
 def is_transductive(method: str, spec: dict, runs: list[Run]) -> bool:
-    """The declared flag, checked against the runs: an alignment on the scored set's own clips is transductive."""
-    used = any(r.metrics.get("alignment", {}).get("transductive", False) for r in runs)
+    """The declared flag, checked against the runs: an alignment on, or self-training with, the scored set's own
+    clips is transductive."""
+    used = any(r.metrics.get(k, {}).get("transductive", False) for r in runs for k in ("alignment", "pseudo_labels"))
     if used and not spec["transductive"]:
-        raise ValueError(f"method {method}: its runs align on the scored set's own clips ({runs[0].path}); declare "
-                         "it transductive: true")
+        raise ValueError(f"method {method}: its runs read the scored set's own clips (alignment or pseudo-labels, "
+                         f"{runs[0].path}); declare it transductive: true")
     return bool(spec["transductive"])
+
+
+def covers(spec: dict, config: str) -> bool:
+    """Whether a method runs on `config` (its `configs`, every configuration by default)."""
+    return "configs" not in spec or config in spec["configs"]
 
 
 def summary(scores: list[tuple[np.ndarray, np.ndarray]]) -> dict:
@@ -68,11 +78,13 @@ def table(root: str | Path, methods: dict[str, dict], configs: list[str], seeds:
           crossfit: dict[str, int] | None = None) -> list[dict]:
     """The rows (COLUMNS plus `selection_score` and `chosen_on`, the JSON's details). `crossfit`: configurations whose cross_real choice is cross-fitted by trials on the
     scored set itself (n folds), for a set that must both choose and be scored."""
-    crossfit = crossfit or {}
-    runs = {(m, c): [read_run(root, m, c, clip_len, s) for s in seeds] for m in methods for c in configs}
-    by_method = {m: [r for c in configs for r in runs[(m, c)]] for m in methods}
+    crossfit, every = crossfit or {}, methods
+    runs = {(m, c): [read_run(root, m, c, clip_len, s) for s in seeds] for m in every for c in configs
+            if covers(every[m], c)}
+    by_method = {m: [r for c in configs if (m, c) in runs for r in runs[(m, c)]] for m in every}
     rows = []
     for config in configs:
+        methods = {m: spec for m, spec in every.items() if covers(spec, config)}
         scored = {m: _scored(runs[(m, config)]) for m in methods}
         flag = {m: is_transductive(m, methods[m], runs[(m, config)]) for m in methods}
         base = {m: summary([(s.probs, s.labels) for s in scored[m]]) for m in methods}

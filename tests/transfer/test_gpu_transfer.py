@@ -1,0 +1,98 @@
+"""The one-call GPU driver of the transfer table (workflow/scripts/gpu_transfer.sh, transfer_commands.py): its
+commands compose for every method, and a CPU tiny run goes teachers -> students -> transfer_table end to end."""
+
+import csv
+import os
+import shlex
+import subprocess
+import sys
+
+import pytest
+
+from palpation.apps.train import job_from_config
+from palpation.paths import REPO_ROOT
+from palpation.transfer.report import read_methods
+
+from tests.apps.test_train_app import TINY, compose_train
+
+SCRIPTS = REPO_ROOT / "workflow" / "scripts"
+sys.path.insert(0, str(SCRIPTS))
+import transfer_commands  # noqa: E402
+
+
+def _lines(*args):
+    out = subprocess.run([sys.executable, str(SCRIPTS / "transfer_commands.py"), *args], capture_output=True,
+                         text=True, cwd=REPO_ROOT, env={**os.environ, "PYTHONPATH": str(REPO_ROOT / "src")})
+    assert out.returncode == 0, out.stderr
+    return out.stdout.splitlines()
+
+
+def test_every_command_composes_and_covers_every_method_and_configuration():
+    methods = read_methods(REPO_ROOT / "conf" / "transfer" / "methods.yaml")
+    lines = _lines("--device", "cuda")
+    scored = set()
+    for line in lines:
+        argv = shlex.split(line)
+        assert argv[:3] == ["python3", "-m", "palpation.apps.train"]
+        overrides = [a for a in argv[3:] if not a.startswith("hydra.")]
+        cfg = compose_train(overrides)
+        job = job_from_config(cfg)
+        assert job.train.device == "cuda" and list(cfg.seeds) == [0, 1, 2, 3, 4] and job.clip_len == 5
+        method = next(a for a in argv if a.startswith("hydra.run.dir=")).split("/")[-3]
+        assert argv[-1].endswith(f"{method}/{job.config_name}/L5")
+        assert job.train.select_metric == "ap"  # the selection rules compare checkpoint-split AP
+        scored |= {(method, job.config_name)} | {(method, a.split(":")[0]) for a in cfg.also_test}
+        if job.train.pseudo != "none" or job.train.select_on == "other_real":
+            assert not cfg.also_test  # trained apart
+    want = {(m, c) for m, spec in methods.items() for c in spec.get("configs", ("A-to-B", "A-to-C", "C-to-B"))}
+    assert scored == want and len(lines) == len(set(lines))
+    students = _lines("--stage", "students")
+    assert students and all("recipe.pseudo_from=" in s for s in students)
+    assert not [t for t in _lines("--stage", "teachers") if "recipe.pseudo_from=" in t]
+
+
+def test_the_driver_script_is_valid_bash_and_refuses_a_bad_jobs_count(tmp_path):
+    script = SCRIPTS / "gpu_transfer.sh"
+    assert subprocess.run(["bash", "-n", str(script)]).returncode == 0
+    out = subprocess.run(["bash", str(script), str(tmp_path)], capture_output=True, text=True, cwd=REPO_ROOT,
+                         env={**os.environ, "JOBS": "0"})
+    assert out.returncode == 2 and "JOBS=0" in out.stderr
+
+
+@pytest.mark.slow
+def test_tiny_cpu_run_end_to_end(train_sets, tmp_path):
+    """Two methods (a teacher and its transductive student) x three configurations x three seeds at tiny size on
+    the CPU through the driver, then the table; a second call skips every finished training."""
+    runs = tmp_path / "runs"
+    methods = tmp_path / "methods.yaml"
+    methods.write_text(f"""methods:
+  robust:
+    about: teacher
+    transductive: false
+    overrides: [recipe=robust]
+  student:
+    about: transductive student, 2 of 3 seeds agreeing
+    transductive: true
+    overrides: [recipe=robust, recipe.select_on=other_real, recipe.pseudo=test_set, recipe.pseudo_min_agree=0.6,
+                recipe.pseudo_from={runs / 'robust'}]
+""")
+    extra = " ".join(shlex.quote(o) for o in ["graph.rest=ideal", "model=compact", *TINY[1:],
+                                               *(f"data.{k}={v}" for k, v in train_sets.items())])
+    env = {**os.environ, "RUNS": str(runs), "METHODS": str(methods), "SEEDS": "0 1 2", "JOBS": "2", "DEVICE": "cpu",
+           "CLIP_LEN": "3", "PYTHON": sys.executable, "EXTRA": extra, "CORES": "2",
+           "PYTHONPATH": str(REPO_ROOT / "src")}
+    out = tmp_path / "out"
+    done = subprocess.run(["bash", str(SCRIPTS / "gpu_transfer.sh"), str(out)], capture_output=True, text=True,
+                          cwd=REPO_ROOT, env=env, timeout=900)
+    log = (out / "transfer.log").read_text()
+    assert done.returncode == 0, done.stdout + log[-3000:]
+    assert "teachers: 2 trainings" in log and "students: 3 trainings" in log
+    rows = list(csv.DictReader(open(out / "transfer.csv")))
+    assert {(r["config"], r["method"]) for r in rows} >= {(c, m) for c in ("A-to-B", "A-to-C", "C-to-B")
+                                                          for m in ("robust", "student")}
+    assert {r["transductive"] for r in rows if r["method"] == "student"} == {"true"}
+    assert (out / "transfer_runs.tgz").is_file()
+    again = subprocess.run(["bash", str(SCRIPTS / "gpu_transfer.sh"), str(out)], capture_output=True, text=True,
+                           cwd=REPO_ROOT, env=env, timeout=300)
+    assert again.returncode == 0 and "teachers: 0 trainings" in (out / "transfer.log").read_text()
+    assert transfer_commands.finished(str(runs), "student", ["C-to-B"], [0, 1, 2], 3)

@@ -1,0 +1,94 @@
+"""The training commands of the transfer table (docs/transfer.md), one shell line each, for gpu_transfer.sh:
+
+    python workflow/scripts/transfer_commands.py --stage teachers --pending --device cuda --logs OUT/logs
+
+Per method of --methods and configuration it runs on: A-to-B scored on Silicone and, by the same models, on Meat
+as A-to-C (also_test), and C-to-B; a method that chooses its checkpoint on the other real set or self-trains
+(recipe.select_on=other_real, recipe.pseudo) trains each configuration apart. All seeds train together in one
+process. Stage `teachers`: the methods without recipe.pseudo_from; `students`: those with it (their teachers'
+scores must exist first). --pending leaves out a training whose every output folder holds every seed's
+metrics.json (a cut training is listed again, whole).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+from palpation.readers import one_line
+from palpation.report.runs import run_dir
+from palpation.transfer.report import CONFIGS, covers, read_methods
+
+TEST_SETS = {"A-to-B": "silicone", "A-to-C": "meat", "C-to-B": "silicone"}
+
+
+def trained_apart(overrides: list[str]) -> bool:
+    """Whether a method's configurations need trainings of their own (their checkpoint split or pseudo-labelled
+    set depends on the scored set, so A-to-B's models cannot score A-to-C)."""
+    return "recipe.select_on=other_real" in overrides or any(
+        o.startswith("recipe.pseudo=") and o != "recipe.pseudo=none" for o in overrides)
+
+
+def stage(overrides: list[str]) -> str:
+    return "students" if any(o.startswith("recipe.pseudo_from=") for o in overrides) else "teachers"
+
+
+def trainings(methods: dict) -> list[tuple[str, str, list[str]]]:
+    """(method, configuration, the configurations it scores) of every training, teachers first."""
+    out = []
+    for name, spec in methods.items():
+        configs = [c for c in CONFIGS if covers(spec, c)]
+        if not trained_apart(spec["overrides"]) and {"A-to-B", "A-to-C"} <= set(configs):
+            out.append((name, "A-to-B", ["A-to-B", "A-to-C"]))
+            configs = [c for c in configs if c not in ("A-to-B", "A-to-C")]
+        out += [(name, c, [c]) for c in configs]
+    return sorted(out, key=lambda t: stage(methods[t[0]]["overrides"]) == "students")
+
+
+def command(root: str, method: str, spec: dict, config: str, scored: list[str], seeds: list[int], device: str,
+            clip_len: int, python: str, extra: list[str]) -> list[str]:
+    also = [f"also_test=[{c}:{TEST_SETS[c]}]" for c in scored if c != config]
+    return [python, "-m", "palpation.apps.train", f"experiment={config}", *spec["overrides"], f"device={device}",
+            f"seeds=[{','.join(map(str, seeds))}]", *also, f"clip_len={clip_len}", "track=false", "progress=false",
+            f"hydra.run.dir={Path(root) / method / config / f'L{clip_len}'}", *extra]
+
+
+def finished(root: str, method: str, scored: list[str], seeds: list[int], clip_len: int) -> bool:
+    return all((run_dir(Path(root) / method, c, clip_len, s) / "metrics.json").is_file() for c in scored for s in seeds)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--methods", default="conf/transfer/methods.yaml")
+    p.add_argument("--runs-root", default="results/transfer")
+    p.add_argument("--stage", choices=("teachers", "students", "all"), default="all")
+    p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4])
+    p.add_argument("--device", default="cuda")
+    p.add_argument("--clip-len", type=int, default=5)
+    p.add_argument("--python", default="python3")
+    p.add_argument("--pending", action="store_true", help="leave out trainings whose runs all exist")
+    p.add_argument("--logs", help="a folder: each command's output goes to <logs>/<method>_<config>.log")
+    p.add_argument("--extra", default="", help="overrides added to every command (one shell-quoted string)")
+    a = p.parse_args(argv)
+    try:
+        methods = read_methods(a.methods)
+        if len(set(a.seeds)) != len(a.seeds) or a.clip_len < 1:
+            raise ValueError(f"--seeds {a.seeds} must be distinct and --clip-len {a.clip_len} >= 1")
+    except (ValueError, OSError) as exc:
+        print(f"transfer_commands: {one_line(exc)}", file=sys.stderr)
+        return 1
+    for method, config, scored in trainings(methods):
+        if a.stage != "all" and stage(methods[method]["overrides"]) != a.stage:
+            continue
+        if a.pending and finished(a.runs_root, method, scored, a.seeds, a.clip_len):
+            continue
+        cmd = shlex.join(command(a.runs_root, method, methods[method], config, scored, a.seeds, a.device,
+                                 a.clip_len, a.python, shlex.split(a.extra)))
+        print(cmd + (f" > {shlex.quote(str(Path(a.logs) / f'{method}_{config}.log'))} 2>&1" if a.logs else ""))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
