@@ -62,6 +62,12 @@ def quick_table(results: Path) -> str:
     return "\n".join(rows)
 
 
+def chance_ap(results: Path, name: str, config: str) -> str:
+    """A configuration's chance AP: its test set's positive rate (data, not seeds), as the sweep records it."""
+    table = _csv(results, name, ("config", "chance"))
+    return f"{table.loc[table['config'] == config, 'chance'].mean():.3f}"
+
+
 def calibration_mae(results: Path, column: str, unit: str = "px", name: str = "calibration.csv") -> str:
     """Mean over the interactions of calibration.csv's `column` (the fitted twin, or a sensor that never moves)."""
     value = _csv(results, name, ("interaction", column))[column].mean()
@@ -315,6 +321,7 @@ def silicone_check(results: Path, what: str) -> str:
 NUMBERS: dict[str, Callable[[Path], str]] = {
     "headline": headline_table,
     "quick": quick_table,
+    "quick.chance_silicone": lambda r: chance_ap(r, "reproduce/quick/seed_sweep.csv", "A-to-B"),
     "calibration.fitted": lambda r: calibration_mae(r, "fitted_px"),
     "calibration.fitted_mm": lambda r: calibration_mae(r, "fitted_mm", "mm"),
     "calibration.undeformed": lambda r: calibration_mae(r, "undeformed_px"),
