@@ -217,18 +217,20 @@ def run_generative(cfg: LoopConfig, simulate, base: Mapping[str, float], templat
                                                            oracle.get(inj.tag)))
         log_batch(out_dir / "timing.json", fp, [inj.tag for inj in injections], time.perf_counter() - start)
         log.info("generative self-test: runs %s saved", [inj.tag for inj in injections])
-    backfill_oracle(cfg, simulate, base, template, geometry, rest_px, out_dir, fp, rest_of, size)
+    backfill_oracle(cfg, simulate, base, template, geometry, rest_px, out_dir, fp, rest_of, g.batch)
     order = {s: i for i, s in enumerate(SPLITS)}
     return sorted(saved(runs_dir, fp).values(), key=lambda r: (order[r["split"]], r["seed"], r["run"]))
 
 
 def backfill_oracle(cfg: LoopConfig, simulate, base: Mapping[str, float], template: list[Target],
                     geometry: Mapping[str, MeasuredState], rest_px: np.ndarray, out_dir: Path, fp: str,
-                    rest_of, size: int) -> None:
+                    rest_of, batch: int) -> None:
     """Complete saved in-list runs made before the oracle: each set is re-made from its seed (the twin on this
-    device; a set made on another differs by the device's floats) and its truth judged; the loop is not re-run."""
+    device; a set made on another differs by the device's floats) and its truth judged; the loop is not re-run.
+    `batch` runs at a time (0: all at once)."""
     runs_dir = out_dir / "runs"
     stale = [r for r in saved(runs_dir, fp).values() if needs_oracle(r)]
+    size = batch or max(len(stale), 1)
     if stale:
         log.info("generative self-test: %d saved runs get the identifiability oracle", len(stale))
     for i in range(0, len(stale), size):
