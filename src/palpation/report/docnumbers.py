@@ -15,7 +15,7 @@ from palpation.readers import read_json
 from palpation.report import paper
 from palpation.report.loop_numbers import (
     fixed_exact_share, fixed_inlist_unexplained, fixed_summary, general_below_power, general_exact_of,
-    general_by_effect, general_oracle, general_quiet, general_shared, general_soft_e, general_summary, general_wall, loop_change, loop_effects, loop_last, loop_rest_ratio,
+    general_by_effect, general_oracle, general_shared, general_soft_e, general_summary, general_wall, loop_change, loop_effects, loop_last, loop_rest_ratio,
     loop_same_table, loop_target, reduced_converged, reduced_mae_after, reduced_run_after, selftest_runs,
 )
 from palpation.report.records import FIX, record_csv as _csv
@@ -367,7 +367,7 @@ NUMBERS: dict[str, Callable[[Path], str]] = {
     "loop.general.dev1_oracle": lambda r: general_oracle(r, "loop_selftest_general_dev1_method.md"),
     "loop.general.test_runs": lambda r: str(len(selftest_runs(r, "loop_selftest_general.csv"))),
     "loop.general.test": lambda r: general_summary(r, "loop_selftest_general.csv"),
-    "loop.general.test_quiet": lambda r: general_quiet(r, "loop_selftest_general.csv"),
+    "loop.general.test_oracle": lambda r: general_oracle(r, "loop_selftest_general.md"),
     "loop.general.test_layered": lambda r: general_by_effect(r, "loop_selftest_general.csv", "layered"),
     "loop.general.test_mount": lambda r: general_by_effect(r, "loop_selftest_general.csv", "mount"),
     "loop.general.test_friction": lambda r: general_by_effect(r, "loop_selftest_general.csv", "friction"),

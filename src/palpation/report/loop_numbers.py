@@ -200,17 +200,6 @@ def general_soft_e(results: Path, name: str, injected: str) -> str:
     return f"{r['excess_ratio']:.1f}× the noise: E {fitted / 1e6:.2f} against {true / 1e6:.2f} MPa"
 
 
-def general_quiet(results: Path, name: str, quiet_excess: float = 1.06) -> str:
-    """Exact in-list runs, and those missing only effects the final residual does not ask for (a subset named,
-    excess <= quiet_excess x the noise: loop.selftest.generative_report.QUIET_EXCESS, restated to keep the loop out)."""
-    table = _csv(results, name, ("excess_ratio",))
-    runs = selftest_runs(results, name)
-    inl = [(r, x) for r, x in zip(runs, table["excess_ratio"]) if not r["unlisted"]]
-    exact = sum(r["named"] == r["injected"] for r, _ in inl)
-    quiet = sum(r["named"] < r["injected"] and x <= quiet_excess for r, x in inl)
-    return f"{exact} → {exact + quiet} of {len(inl)} ({_pct((exact + quiet) / len(inl))})"
-
-
 def general_by_effect(results: Path, name: str, effect: str) -> str:
     """One effect over the in-list runs: named where injected, and named where not (spurious)."""
     inl = [r for r in selftest_runs(results, name) if not r["unlisted"]]
