@@ -184,6 +184,21 @@ def log_batch(path: Path, fp: str, tags: list[str], wall_s: float) -> None:
     save_json(path, batches)
 
 
+def run_sets(cfg: LoopConfig, base: Mapping[str, float], draws: list[tuple[int, int, int]], simulate,
+             template: list[Target], geometry: Mapping[str, MeasuredState], rest_px: np.ndarray, out_dir: Path,
+             rest_of) -> tuple[list[Injection], list[Path]]:
+    """The runs' truths (seed, run, attempt) drawn, simulated (a diverged one drawn again), their outside effects
+    and noise added, and their sets saved under <out>/sets; returns the injections and the sets' paths."""
+    seed_of = {tag(s, r): s for s, r, _ in draws}
+    injections = [draw(cfg, base, s, r, attempt) for s, r, attempt in draws]
+    markers = simulate_injections(injections, template, simulate, cfg, base,
+                                  lambda inj, attempt: draw(cfg, base, seed_of[inj.tag], inj.run, attempt))
+    for inj in injections:
+        inj.rest = rest_of(inj.params) if rest_of else None
+    return injections, make_sets(injections, markers, template, cfg.generative.noise_px, None, Path(out_dir) / "sets",
+                                 geometry, rest_px)
+
+
 def run_generative(cfg: LoopConfig, simulate, base: Mapping[str, float], template: list[Target],
                    geometry: Mapping[str, MeasuredState], rest_px: np.ndarray, out_dir: Path, db_path: Path,
                    tkey: str, rest_of: Callable[[Mapping[str, float]], np.ndarray] | None = None,
@@ -204,12 +219,8 @@ def run_generative(cfg: LoopConfig, simulate, base: Mapping[str, float], templat
         start = time.perf_counter()
         chunk = todo[i:i + size]
         seed_of = {tag(s, r): s for s, r in chunk}
-        injections = [draw(cfg, base, s, r) for s, r in chunk]
-        markers = simulate_injections(injections, template, simulate, cfg, base,
-                                      lambda inj, attempt: draw(cfg, base, seed_of[inj.tag], inj.run, attempt))
-        for inj in injections:
-            inj.rest = rest_of(inj.params) if rest_of else None
-        paths = make_sets(injections, markers, template, g.noise_px, None, out_dir / "sets", geometry, rest_px)
+        injections, paths = run_sets(cfg, base, [(s, r, 0) for s, r in chunk], simulate, template, geometry, rest_px,
+                                     out_dir, rest_of)
         rows, problems = loop_on_sets(cfg, injections, paths, simulate, base, db_path, tkey, g.max_rounds, progress)
         oracle = identifiable(cfg, injections, paths, simulate, base)
         for inj, row, p in zip(injections, rows, problems):
@@ -235,14 +246,8 @@ def backfill_oracle(cfg: LoopConfig, simulate, base: Mapping[str, float], templa
         log.info("generative self-test: %d saved runs get the identifiability oracle", len(stale))
     for i in range(0, len(stale), size):
         chunk = stale[i:i + size]
-        seed_of = {tag(r["seed"], r["run"]): r["seed"] for r in chunk}
-        injections = [draw(cfg, base, r["seed"], r["run"], r["redrawn"]) for r in chunk]  # the draw it was made of
-        markers = simulate_injections(injections, template, simulate, cfg, base,
-                                      lambda inj, attempt: draw(cfg, base, seed_of[inj.tag], inj.run, attempt))
-        for inj in injections:
-            inj.rest = rest_of(inj.params) if rest_of else None
-        paths = make_sets(injections, markers, template, cfg.generative.noise_px, None, out_dir / "sets", geometry,
-                          rest_px)
+        injections, paths = run_sets(cfg, base, [(r["seed"], r["run"], r["redrawn"]) for r in chunk], simulate,
+                                     template, geometry, rest_px, out_dir, rest_of)  # the draw each was made of
         oracle = identifiable(cfg, injections, paths, simulate, base)
         for inj, rec in zip(injections, chunk):
             save_json(runs_dir / f"{inj.tag}.json", {**rec, **judged(inj, oracle.get(inj.tag))})
