@@ -126,3 +126,24 @@ def test_resume_after_sigkill_is_exact(tmp_path, where, suffix):
     run_search(killed, SPACE, 8, 3, 2, bowl)
     assert [(t.number, t.state.name, t.params, t.value) for t in killed.trials] == \
         [(t.number, t.state.name, t.params, t.value) for t in whole.trials]
+
+
+def test_journal_storage_is_reused_and_sees_other_writers(tmp_path):
+    """A journal is replayed once per process: a second open reuses the storage, which still sees trials written
+    through another storage (as by a proposer process); a replaced file is read afresh."""
+    import optuna
+
+    from palpation.calibration import search as s
+
+    db = tmp_path / "loop.journal"
+    first = s.study_storage(db)
+    assert s.study_storage(db) is first
+    other = optuna.storages.JournalStorage(optuna.storages.journal.JournalFileBackend(str(db)))
+    run_search(optuna.create_study(storage=other, study_name="bowl", sampler=make_sampler("gp", 0, 3),
+                                   direction="maximize"), SPACE, 4, 3, 1, bowl)
+    seen = open_study(db, "bowl", make_sampler("gp", 0, 3), "maximize")
+    assert seen._storage is first and completed(seen) == 4
+    db.unlink()
+    run_search(open_study(db, "cone", make_sampler("gp", 0, 3), "maximize"), SPACE, 2, 3, 1, bowl)
+    fresh = s.study_storage(db)
+    assert fresh is not first and [x.study_name for x in fresh.get_all_studies()] == ["cone"]

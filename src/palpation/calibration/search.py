@@ -85,8 +85,33 @@ def study_storage(path: Path) -> optuna.storages.BaseStorage:
     if path.suffix == ".db":  # a generous lock timeout: parallel proposers write to one file at once
         return optuna.storages.RDBStorage(f"sqlite:///{path}", engine_kwargs={"connect_args": {"timeout": 300}})
     if path.suffix == ".journal":
-        return optuna.storages.JournalStorage(optuna.storages.journal.JournalFileBackend(str(path)))
+        return _journal(path)
     raise ValueError(f"{path}: a study file must end in .db (SQLite) or .journal (Optuna journal)")
+
+
+_JOURNALS: dict[str, tuple[tuple[int, int], bytes, int, optuna.storages.JournalStorage]] = {}
+_HEAD = 4096  # bytes of a journal that identify it (its first studies' names and start times)
+
+
+def _journal(path: Path) -> optuna.storages.JournalStorage:
+    """One journal storage per file and process, reused: a new storage replays the whole file on its first read
+    (the loop's file reaches ~100 MB over a self-test and is opened by every problem and proposer), a reused one
+    reads only the lines appended since. A file that was replaced (another inode, another head, or shorter than
+    when last seen) gets a fresh storage."""
+    key = str(path.resolve())
+    if path.exists() and key in _JOURNALS:
+        inode, head, size, storage = _JOURNALS[key]
+        st = path.stat()
+        with open(path, "rb") as f:
+            now = f.read(_HEAD)
+        if inode == (st.st_dev, st.st_ino) and st.st_size >= size and now.startswith(head):
+            _JOURNALS[key] = (inode, now, st.st_size, storage)
+            return storage
+    storage = optuna.storages.JournalStorage(optuna.storages.journal.JournalFileBackend(str(path)))
+    st = path.stat()
+    with open(path, "rb") as f:
+        _JOURNALS[key] = ((st.st_dev, st.st_ino), f.read(_HEAD), st.st_size, storage)
+    return storage
 
 
 def open_study(db_path: Path, name: str, sampler: optuna.samplers.BaseSampler,
