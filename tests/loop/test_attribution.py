@@ -37,3 +37,24 @@ def test_noise_alone_names_nothing_and_dead_columns_stay_zero(sigs):
     assert att.betas["dead"]["d"] == 0.0
     with pytest.raises(ValueError, match="not finite"):
         attribute(np.full(600, np.nan), sigs)
+
+
+def test_an_effect_along_a_refitted_column_is_credited_given_that_column():
+    """The residual is what a shell leaves once E was fitted: orthogonal to E's column. The shell's signature is
+    mostly along E's, so alone it explains little and the BIC leaves it out; held with E's column it explains
+    the residual and is named, with its own beta."""
+    rng = np.random.default_rng(6)
+    n = 600
+    e_col = rng.normal(size=n)
+    perp = rng.normal(size=n)
+    perp -= (perp @ e_col) / (e_col @ e_col) * e_col
+    shell = Signature("layered", ["ratio"], (5.0 * e_col + 0.3 * perp)[:, None], [True])
+    other = Signature("mount", ["dz"], rng.normal(size=(n, 1)), [False])
+    refit = Signature("_refit", ["E"], e_col[:, None], [False])
+    needed = 0.3 * perp + rng.normal(0, 0.1, n)  # the twin lacks the shell at beta 1, E took its part along e_col
+    plain = attribute(-needed, [shell, other])
+    given = attribute(-needed, [shell, other], nuisance=refit)
+    assert plain.share_of("layered") < 0.01 and "layered" not in plain.best_subset
+    assert given.named == "layered" and given.share_of("layered") > 0.85
+    assert given.betas["layered"]["ratio"] == pytest.approx(1.0, abs=0.05)
+    assert given.share_of("mount") < 0.05

@@ -132,7 +132,9 @@ def test_the_final_refit_also_starts_from_the_last_null_try(tmp_path, refit_star
                       n != "h") for n in AMP]
     p = Problem("toy", "key", targets, initial_params({"E": E0, "alpha": 0.02}), ["E"],
                 candidates=["marker_anchor"], noise_px=NOISE)
-    cfg = LoopConfig(effects=["marker_anchor"], search=SearchSettings(sampler="random", n_trials=8, n_startup=8), method=Method(compete=True, final_refit_starts=refit_starts)).validate()
+    # the attribution alone: given the re-fit columns it would try nothing here (E's column explains the residual)
+    cfg = LoopConfig(effects=["marker_anchor"], search=SearchSettings(sampler="random", n_trials=8, n_startup=8),
+                     method=Method(compete=True, final_refit_starts=refit_starts, attribute_given_refit=False)).validate()
     evaluate([p], simulate_mimic)
     run_rounds([p], simulate_mimic, cfg, tmp_path / "s.db", "toy", 1)
     assert p.effects == [] and p.rounds and p.rounds[0]["after"] is not None and not p.rounds[0]["accepted"]
@@ -140,6 +142,23 @@ def test_the_final_refit_also_starts_from_the_last_null_try(tmp_path, refit_star
     null_end = p.rounds[0]["after"]["gate_null"]["params"]
     assert (p.starts == [null_end]) == (refit_starts > 1) and len(p.starts) <= refit_starts - 1
     assert abs(np.log(null_end["E"] / E0) / np.log(1.25) - 1.5) < 0.05  # the null try found E
+
+
+def test_given_the_refit_columns_an_effect_that_mimics_e_is_not_tried(tmp_path):
+    """The same data (they differ from the twin by E alone): held with E's column, the anchor explains nothing of
+    the residual, so the round tries no effect and ends (loop.method.attribute_given_refit, the default)."""
+    rng = np.random.default_rng(0)
+    full = initial_params({"E": E0 * 1.25 ** 1.5, "alpha": 0.02})
+    targets = [Target(State(n, "press", 2.0), mimic(State(n, "press"), full) + rng.normal(0, NOISE, REST.shape),
+                      n != "h") for n in AMP]
+    p = Problem("toy", "key", targets, initial_params({"E": E0, "alpha": 0.02}), ["E"],
+                candidates=["marker_anchor"], noise_px=NOISE)
+    cfg = LoopConfig(effects=["marker_anchor"], search=SearchSettings(sampler="random", n_trials=8, n_startup=8)
+                     ).validate()
+    assert cfg.method.attribute_given_refit
+    evaluate([p], simulate_mimic)
+    run_rounds([p], simulate_mimic, cfg, tmp_path / "s.db", "toy", 1)
+    assert p.effects == [] and len(p.rounds) == 1 and p.rounds[0]["effect"] is None and p.done
 
 
 @pytest.mark.parametrize("converged", [True, False])

@@ -46,7 +46,11 @@ def sim_of(cubic=0.0):
 
 
 def cfg(null_try: bool) -> LoopConfig:
-    return LoopConfig(effects=["mount"], search=SearchSettings(sampler="random", n_trials=8, n_startup=8), method=Method(tries_per_round=1, pair_tries=0, null_try=null_try)).validate()
+    # the attribution alone, so the mount is tried (given E's column it explains nothing here and is never tried:
+    # test_converge) and the null try is what refuses it
+    return LoopConfig(effects=["mount"], search=SearchSettings(sampler="random", n_trials=8, n_startup=8),
+                      method=Method(tries_per_round=1, pair_tries=0, null_try=null_try,
+                                    attribute_given_refit=False)).validate()
 
 
 def _loop(tmp_path, null_try: bool, mount_true: float) -> Problem:
@@ -111,7 +115,9 @@ def test_a_null_try_finished_by_the_local_solver_refuses_an_absorbing_effect(tmp
     cubic = 0.15
     p = problem({"E": E0, "mount_tilt_x_deg": 0.0}, start_E=E0 * 2.5, cubic=cubic)
     # projected_null off: it would refuse the mount by itself (its LM re-fit is a local finish too: test_projected)
-    c = LoopConfig(effects=["mount"], search=SearchSettings(sampler="random", n_trials=8, n_startup=8), method=Method(tries_per_round=1, pair_tries=0, null_try=True, polish_iters=polish_iters, projected_null=False)).validate()
+    c = LoopConfig(effects=["mount"], search=SearchSettings(sampler="random", n_trials=8, n_startup=8),
+                   method=Method(tries_per_round=1, pair_tries=0, null_try=True, polish_iters=polish_iters,
+                                 projected_null=False, attribute_given_refit=False)).validate()
     evaluate([p], sim_of(cubic))
     run_rounds([p], sim_of(cubic), c, tmp_path / "s.db", "toy", 1)
     tried = [r for r in p.rounds if r["effects"] == ["mount"]][0]

@@ -7,6 +7,10 @@ dof: the marker-field change at the nominal step). For a subset S of effects,
 and BIC(S) = N ln(RSS_S / N) + k_S ln N (N = stacked coordinates, k_S = columns). Effects are ranked
 by the share of the residual energy each explains alone; the one named is the best-ranked effect of
 the BIC-best subset (none if that subset is empty: nothing explains the residual better than noise).
+
+Given `nuisance` columns (the twin's own parameters, which the round re-fits with any new effect), every fit
+holds them too and shares are of what they leave: an effect whose signature lies partly along E's column
+(a stiffer shell) is credited with what it explains once E may move as well, as the round will let it.
 """
 
 from __future__ import annotations
@@ -66,8 +70,9 @@ def bic(rss: float, n: int, k: int) -> float:
 
 
 def attribute(residual: np.ndarray, signatures: list[Signature], max_subset: int | None = None,
-              min_rms_px: float = 0.02) -> Attribution:
-    """Rank the effects by the residual share they explain and name the best one the BIC keeps."""
+              min_rms_px: float = 0.02, nuisance: Signature | None = None) -> Attribution:
+    """Rank the effects by the residual share they explain and name the best one the BIC keeps.
+    `nuisance`: columns held in every fit, the no-effect baseline included (module docstring)."""
     y = -np.asarray(residual, np.float64).reshape(-1)
     if not np.all(np.isfinite(y)):
         raise ValueError("attribution: the residual is not finite")
@@ -75,12 +80,14 @@ def attribute(residual: np.ndarray, signatures: list[Signature], max_subset: int
         if s.columns.shape[0] != len(y) or not np.all(np.isfinite(s.columns)):
             raise ValueError(f"attribution: signature of '{s.effect}' has shape {s.columns.shape} or "
                              f"non-finite values; expected ({len(y)}, k) finite")
-    n, rss0 = len(y), float(y @ y)
+    held = [] if nuisance is None else [nuisance]
+    k0 = 0 if nuisance is None else nuisance.columns.shape[1]
+    n, rss0 = len(y), fit_subset(y, held, min_rms_px)[1]
     base_bic = bic(rss0, n, 0)
     ranking, betas = [], {}
     for s in signatures:
-        beta, rss = fit_subset(y, [s], min_rms_px)
-        betas[s.effect] = dict(zip(s.dofs, map(float, beta)))
+        beta, rss = fit_subset(y, [*held, s], min_rms_px)
+        betas[s.effect] = dict(zip(s.dofs, map(float, beta[k0:])))
         ranking.append({"effect": s.effect, "share": 1.0 - rss / rss0 if rss0 > 0 else 0.0,
                         "bic_delta": bic(rss, n, s.columns.shape[1]) - base_bic, "beta": betas[s.effect]})
     ranking.sort(key=lambda r: -r["share"])
@@ -88,7 +95,7 @@ def attribute(residual: np.ndarray, signatures: list[Signature], max_subset: int
     top = len(signatures) if max_subset is None else max_subset
     for size in range(1, top + 1):
         for subset in combinations(signatures, size):
-            _, rss = fit_subset(y, list(subset), min_rms_px)
+            _, rss = fit_subset(y, [*held, *subset], min_rms_px)
             value = bic(rss, n, sum(s.columns.shape[1] for s in subset))
             if value < best_bic:
                 best, best_bic, best_rss = [s.effect for s in subset], value, rss
@@ -98,7 +105,8 @@ def attribute(residual: np.ndarray, signatures: list[Signature], max_subset: int
 
 
 def joint_candidates(residual: np.ndarray, signatures: list[Signature], conditional: dict[str, Signature],
-                     requires: dict[str, tuple[str, ...]], pool: list[str], min_rms_px: float = 0.02) -> list[dict]:
+                     requires: dict[str, tuple[str, ...]], pool: list[str], min_rms_px: float = 0.02,
+                     nuisance: Signature | None = None) -> list[dict]:
     """Effect pairs to try jointly when single effects fail, best (lowest BIC) first.
 
     * dependent pairs: an effect that acts only through another (friction needs surface contact) is
@@ -106,22 +114,24 @@ def joint_candidates(residual: np.ndarray, signatures: list[Signature], conditio
       next to the provider's own columns: alone its signature is dead;
     * independent pairs: any two live effects of `pool` (the BIC-best subset and the top of the ranking).
     A pair is kept only if its BIC beats no change and each of its members alone: two effects that only
-    show together, or two that each explain part of the residual."""
+    show together, or two that each explain part of the residual. `nuisance`: as in `attribute`."""
     y = -np.asarray(residual, np.float64).reshape(-1)
     n = len(y)
+    held = [] if nuisance is None else [nuisance]
     by = {s.effect: s for s in signatures}
-    alone = {e: bic(fit_subset(y, [s], min_rms_px)[1], n, s.columns.shape[1]) for e, s in by.items()}
+    alone = {e: bic(fit_subset(y, [*held, s], min_rms_px)[1], n, s.columns.shape[1]) for e, s in by.items()}
     plans = []
     for e, s in conditional.items():
         if all(r in by for r in requires.get(e, ())):
             plans.append(((*requires[e], e), [*(by[r] for r in requires[e]), s]))
     live = [e for e in dict.fromkeys(pool) if e in by and not requires.get(e)]
     plans += [((a, b), [by[a], by[b]]) for a, b in combinations(live, 2)]
-    out, base = [], bic(float(y @ y), n, 0)
+    rss0 = fit_subset(y, held, min_rms_px)[1]
+    out, base = [], bic(rss0, n, 0)
     for effects, sigs in plans:
-        _, rss = fit_subset(y, sigs, min_rms_px)
+        _, rss = fit_subset(y, [*held, *sigs], min_rms_px)
         value = bic(rss, n, sum(s.columns.shape[1] for s in sigs))
         if value < base and all(value < alone.get(e, base) for e in effects):
-            out.append({"effects": tuple(effects), "bic": value, "share": 1.0 - rss / float(y @ y) if y @ y > 0
-                        else 0.0, "sigs": sigs})
+            out.append({"effects": tuple(effects), "bic": value, "share": 1.0 - rss / rss0 if rss0 > 0 else 0.0,
+                        "sigs": sigs})
     return sorted(out, key=lambda d: d["bic"])

@@ -149,18 +149,18 @@ def trust_region(p: Problem, names, factor: float, overrides: Mapping | None = N
 
 
 def round_plan(p: Problem, att, sigs: list[Signature], cond: dict[str, Signature], residual: np.ndarray,
-               cfg: LoopConfig) -> list[dict]:
+               cfg: LoopConfig, given: Signature | None = None) -> list[dict]:
     """What to try this round, in order: single effects of the BIC-best subset by rank
     (cfg.method.tries_per_round), then pairs tried jointly (cfg.method.pair_tries): dependent pairs and pairs of the
     BIC-best subset / top of the ranking (attribution.joint_candidates). Pairs are tried only after every
-    single try failed the gate."""
+    single try failed the gate. `given`: columns held in every attribution fit (method.attribute_given_refit)."""
     by = {s.effect: s for s in sigs}
     singles = [r["effect"] for r in att.ranking if r["effect"] in att.best_subset][:cfg.method.tries_per_round]
     plan = [{"effects": (e,), "sigs": [by[e]], "share": att.share_of(e)} for e in singles]
     if cfg.method.pair_tries > 0:
         pool = [*att.best_subset, *[r["effect"] for r in att.ranking[:3]]]
         requires = {e: EFFECTS[e].requires for e in p.candidates}
-        pairs = joint_candidates(residual, sigs, cond, requires, pool, MIN_RMS_PX)
+        pairs = joint_candidates(residual, sigs, cond, requires, pool, MIN_RMS_PX, given)
         plan += [{"effects": d["effects"], "sigs": d["sigs"], "share": d["share"], "pair": True}
                  for d in pairs[:cfg.method.pair_tries]]
     return plan
@@ -190,9 +190,10 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                                  "cond": conds[p.name], "refit_dofs": list(p.refit)}
             fit_ix = [i for i, t in enumerate(p.targets) if t.fit]
             residual = np.stack([p.markers[i] - p.targets[i].markers for i in fit_ix])
-            att = attribute(residual, sigs[p.name], min_rms_px=MIN_RMS_PX)
+            given = refits[p.name] if cfg.method.attribute_given_refit else None
+            att = attribute(residual, sigs[p.name], min_rms_px=MIN_RMS_PX, nuisance=given)
             before[p.name] = (p.summary(), dict(p.params), p.markers.copy(), att, list(p.searched), residual)
-            queue[p.name] = round_plan(p, att, sigs[p.name], conds[p.name], residual, cfg)
+            queue[p.name] = round_plan(p, att, sigs[p.name], conds[p.name], residual, cfg, given)
             if not queue[p.name]:
                 p.done = True
                 p.rounds.append(_record(k, p, None, att, before[p.name], None, accepted=False))

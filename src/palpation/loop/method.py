@@ -25,6 +25,9 @@ class Method:
     min_improvement_px: float = ranged(0.05, Num(ge=0))
     min_improvement_rel: float = ranged(0.05, Num(ge=0))
     tries_per_round: int = ranged(2, Int(ge=1))  # single effects tried per round, best-ranked first
+    # the attribution (loop.attribution) holds the twin's own parameters' columns in every fit, as the round re-fits
+    # them: a candidate partly along E's column (a stiffer shell) is credited with what it explains once E may move
+    attribute_given_refit: bool = True
     pair_tries: int = ranged(2, Int(ge=0))  # then effect pairs fitted jointly (dependent pairs, the BIC-best subset)
     # gate (loop.gate): a fit that falls this much is kept if the held-out does not move beyond gate_z cluster
     # standard errors either way

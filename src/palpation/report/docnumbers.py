@@ -14,9 +14,9 @@ from pathlib import Path
 from palpation.readers import read_json
 from palpation.report import paper
 from palpation.report.loop_numbers import (
-    fixed_exact_share, fixed_inlist_unexplained, fixed_summary, general_below_power, general_by_effect,
-    general_exact_of, general_oracle, general_shared, general_soft_e, general_summary, general_wall, loop_change,
-    loop_effects, loop_last, loop_rest_ratio, loop_same_table, loop_target, reduced_converged, reduced_mae_after,
+    attribution_choice, fixed_exact_share, fixed_inlist_unexplained, fixed_summary, general_below_power,
+    general_by_effect, general_exact_of, general_oracle, general_shared, general_soft_e, general_split,
+    general_summary, loop_change, loop_effects, loop_last, loop_rest_ratio, loop_same_table, loop_target, reduced_converged, reduced_mae_after,
     reduced_run_after, selftest_runs,
 )
 from palpation.report.maps_numbers import SILICONE_MEASURES, silicone_check
@@ -327,13 +327,12 @@ NUMBERS: dict[str, Callable[[Path], str]] = {
     "loop.general.paper_exact": lambda r: general_exact_of(r, "loop_selftest_general_dev_paper_partial.csv"),
     "loop.general.dev1": lambda r: general_summary(r, "loop_selftest_general_dev1_method.csv"),
     "loop.general.dev1_oracle": lambda r: general_oracle(r, "loop_selftest_general_dev1_method.md"),
-    "loop.general.test_runs": lambda r: str(len(selftest_runs(r, "loop_selftest_general.csv"))),
-    "loop.general.test": lambda r: general_summary(r, "loop_selftest_general.csv"),
-    "loop.general.test_oracle": lambda r: general_oracle(r, "loop_selftest_general.md"),
-    "loop.general.test_layered": lambda r: general_by_effect(r, "loop_selftest_general.csv", "layered"),
-    "loop.general.test_mount": lambda r: general_by_effect(r, "loop_selftest_general.csv", "mount"),
-    "loop.general.test_friction": lambda r: general_by_effect(r, "loop_selftest_general.csv", "friction"),
-    "loop.general.test_wall": lambda r: general_wall(r, "loop_selftest_general_test.log"),
+    **{f"loop.general.test{k}": v for k, v in general_split("loop_selftest_general",
+                                                             "loop_selftest_general_test.log").items()},
+    **{f"loop.general.prev_test{k}": v for k, v in general_split("loop_selftest_general_seed1000",
+                                                                  "loop_selftest_general_seed1000_test.log",
+                                                                  ("layered",)).items()},
+    "loop.general.attribution": lambda r: attribution_choice(r, "loop_dev_attribution.json"),
     "loop.paper.effects": lambda r: loop_effects(r, "paper/loop/loop_real.csv"),
     "loop.paper.heldout": lambda r: loop_change(r, "mae_heldout_px", "px", 4, "paper/loop/loop_real.csv"),
     "loop.paper.mae_mm": lambda r: loop_change(r, "mae_mean_mm", "mm", 4, "paper/loop/loop_real.csv"),

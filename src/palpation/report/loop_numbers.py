@@ -10,6 +10,7 @@ import json
 import re
 from datetime import datetime
 from pathlib import Path
+from typing import Callable
 
 from palpation.readers import read_text
 from palpation.report.records import FIX, record_csv as _csv
@@ -209,14 +210,15 @@ def general_by_effect(results: Path, name: str, effect: str) -> str:
 
 
 def general_wall(results: Path, log_name: str) -> str:
-    """The generative self-test's batches as its log times them: from the start line to each "runs [...] saved"."""
+    """The generative self-test's saved batches as its log times them: their runs, from the start line to the last
+    "runs [...] saved" (a batch the run did not finish is not counted)."""
     stamps = re.findall(r"^\[(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d),\d+\]\[[\w.]+\]\[INFO\] - generative self-test"
                         r"(?::)? (?:runs \[(.*?)\] saved|\()", read_text(results / log_name, FIX, "record"), re.M)
     if len(stamps) < 2 or stamps[0][1]:
         raise ValueError(f"record {results / log_name}: no start line followed by a 'runs [...] saved' line")
     start = datetime.fromisoformat(stamps[0][0])
     saved = [(datetime.fromisoformat(t), runs.count("'") // 2) for t, runs in stamps[1:] if runs]
-    end, n = saved[0]
+    end, n = saved[-1][0], sum(k for _, k in saved)
     return f"{n} runs in {(end - start).total_seconds():.0f} s"
 
 
@@ -231,3 +233,24 @@ def general_oracle(results: Path, md_name: str) -> str:
                          "page again with the oracle (resume the self-test)")
     runs, exact, missing = found[0]
     return f"exact {exact.replace('%', ' %')} of {runs} judged runs (not identifiable: {missing})"
+
+
+def general_split(stem: str, log_name: str, effects: tuple[str, ...] = ("layered", "mount", "friction")
+                  ) -> dict[str, Callable[[Path], str]]:
+    """The doc keys of one generative test record (<stem>.csv, its page <stem>.md and its log): size, summary,
+    oracle, wall time and the named `effects`."""
+    csv, md = f"{stem}.csv", f"{stem}.md"
+    keys = {"_runs": lambda r: str(len(selftest_runs(r, csv))), "": lambda r: general_summary(r, csv),
+            "_oracle": lambda r: general_oracle(r, md), "_wall": lambda r: general_wall(r, log_name)}
+    for effect in effects:
+        keys[f"_{effect}"] = lambda r, e=effect: general_by_effect(r, csv, e)
+    return keys
+
+
+def attribution_choice(results: Path, name: str) -> str:
+    """The dev comparison that chose the attribution given the re-fit columns (workflow/scripts/loop_dev_choice.py)."""
+    record = json.loads(read_text(results / name, FIX, "record"))
+    a, b = record["counts"]["default"], record["counts"]["changed"]
+    return (f"exact {a['exact']} → {b['exact']} of {a['in_list']}, outside `unexplained` {a['outside_unexplained']} → "
+            f"{b['outside_unexplained']} and nothing beyond the truth {a['outside_clean']} → {b['outside_clean']} of "
+            f"{a['outside']} (chosen: {record['choice']})")
