@@ -92,3 +92,30 @@ def test_noise_from_metadata_rest_frames_or_assumed():
     assert sigma == pytest.approx(0.5 / np.sqrt(2), rel=0.1) and "rest frame" in where
     m = make_measured_set(np.stack([rest, rest]), np.ones((2, 127), bool), rest, states)
     assert noise_estimate(m, 0.2)[1].startswith("assumed")
+
+
+@pytest.mark.parametrize("beyond", ["twin", "candidates"])
+def test_a_residual_only_a_candidate_spans_is_unexplained_beyond_the_twin(beyond):
+    """The final twin leaves a smooth residual that a candidate's column spans (its try was refused, say): beyond the
+    twin it is unexplained, with the candidates' share beside it; beyond every candidate (the earlier rule) it is
+    not. A residual at the noise is unexplained under neither."""
+    from types import SimpleNamespace
+
+    from palpation.loop.simulate import State
+    from palpation.loop.unexplained import final_check
+
+    rng = np.random.default_rng(7)
+    rest = rest_template().astype(np.float64)
+    states = [State(n, "press", d) for n, d in (("a", 1.0), ("b", 2.0), ("h", 1.5))]
+    targets = [SimpleNamespace(name=s.name, state=s, fit=s.name != "h", markers=rest) for s in states]
+    n = 2 * rest.size
+    shape = rng.normal(size=n)  # what a camera shift would explain
+    refit = Signature("_refit", ["E"], rng.normal(size=(n, 1)), [False])
+    cand = Signature("camera", ["dx"], shape[:, None], [False])
+    for amp, flagged in ((1.0, beyond == "twin"), (0.0, False)):
+        r = amp * shape + rng.normal(0, 0.2, n)
+        sim = [rest + r[:rest.size].reshape(rest.shape), rest + r[rest.size:].reshape(rest.shape), rest]
+        p = SimpleNamespace(targets=targets, markers=np.stack(sim))
+        t = final_check(p, [cand], {}, refit, [], 0.2, 1e-3, 2.0, beyond)["test"]
+        assert t["unexplained"] == flagged and t["beyond"] == beyond
+        assert (t["explained_by_candidates"] > 0.9) == (amp > 0) and t["excess_beyond_candidates"] < 1.2

@@ -145,10 +145,14 @@ def verdict_lines(p: Problem, meta: Mapping) -> list[str]:
                     "so the residual below is partly what the search left."))
     t = f.get("test")
     if t:
+        twin = t.get("beyond", "candidates") == "twin"
         head = (f"* Remaining residual: RMS {t['rms_px']:.2f} px per coordinate on the fitted states against detector "
-                f"noise {t['noise_px']:.2f} px ({f.get('noise_source', '')}); the candidates could still explain "
-                f"{t['explained_by_candidates']:.0%} of it; the rest is {t['excess_ratio']:.1f}× the noise "
-                f"(χ² p = {t['p_value']:.2g}).")
+                f"noise {t['noise_px']:.2f} px ({f.get('noise_source', '')}); "
+                + (f"beyond the final twin's own parameters {t['excess_ratio']:.1f}× the noise (χ² p = "
+                   f"{t['p_value']:.2g}); the remaining candidates' columns would span "
+                   f"{t['explained_by_candidates']:.0%} of it (their tries are in the rounds above)." if twin else
+                   f"the candidates could still explain {t['explained_by_candidates']:.0%} of it; the rest is "
+                   f"{t['excess_ratio']:.1f}× the noise (χ² p = {t['p_value']:.2g})."))
         L.append(head)
         if t["unexplained"]:
             d = f.get("discrepancy", {})
@@ -157,7 +161,8 @@ def verdict_lines(p: Problem, meta: Mapping) -> list[str]:
                      f"fitted MAE to {d.get('mae_fit_px', float('nan')):.2f} px and the held-out to "
                      f"{d.get('mae_heldout_px', float('nan')):.2f} px.")
         else:
-            L.append("* No unexplained residual: what remains is noise or within what the candidates span.")
+            L.append("* No unexplained residual: what remains is at the noise." if twin else
+                     "* No unexplained residual: what remains is noise or within what the candidates span.")
     mean = meta.get("mean_px")
     if meta.get("target_applies"):
         ok = mean <= meta["target_mm"] / MM_PER_PX

@@ -254,3 +254,13 @@ def attribution_choice(results: Path, name: str) -> str:
     return (f"exact {a['exact']} → {b['exact']} of {a['in_list']}, outside `unexplained` {a['outside_unexplained']} → "
             f"{b['outside_unexplained']} and nothing beyond the truth {a['outside_clean']} → {b['outside_clean']} of "
             f"{a['outside']} (chosen: {record['choice']})")
+
+
+def verdict_rescore(results: Path, name: str) -> str:
+    """The final check's two rules on the same final twins (workflow/scripts/loop_verdict_rescore.py)."""
+    table = _csv(results, name, ("unlisted", "exact", "unexplained_twin", "unexplained_candidates"))
+    out = table[table["unlisted"].fillna("") != ""]
+    exact = table[(table["unlisted"].fillna("") == "") & table["exact"]]
+    return (f"outside runs flagged {int(out['unexplained_candidates'].sum())} → {int(out['unexplained_twin'].sum())} "
+            f"of {len(out)}, runs with the exact set flagged {int(exact['unexplained_candidates'].sum())} → "
+            f"{int(exact['unexplained_twin'].sum())} of {len(exact)}")

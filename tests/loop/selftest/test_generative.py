@@ -268,15 +268,15 @@ def test_app_generative_mode_writes_the_table(tmp_path):
     save_measured_set(tmp_path / "geometry", make_measured_set(np.stack([REST] * 3).astype(np.float32),
                                                                np.ones((3, 127), bool), REST, states))
     out = tmp_path / "out"
+    sizes = [f"mesh={tmp_path / 'mesh.npz'}", f"measured={tmp_path / 'geometry'}", "loop.max_frames=30",
+             "loop.search.n_trials=2", "loop.search.n_startup=1", "loop.method.tries_per_round=1",
+             "loop.method.pair_tries=0", "loop.method.polish_iters=0", "loop.method.final_refit_iters=0",
+             "loop.effects=[surface_contact,camera]", "loop.selftest.states=[press,twist_x]",
+             "loop.selftest.holdout=[twist_x]", "loop.generative.runs=2", "loop.generative.max_rounds=1",
+             "loop.generative.n_effects=[0,1]", "loop.generative.unlisted_share=0.5", "loop.generative.dev_seeds=[2]"]
     with initialize_config_dir(config_dir=str(REPO_ROOT / "conf"), version_base="1.3"):
-        cfg = compose(config_name="loop", overrides=[
-            f"mesh={tmp_path / 'mesh.npz'}", f"measured={tmp_path / 'geometry'}", "track=false", "progress=false",
-            f"out.dir={out}", "mode=generative", "loop.max_frames=30", "loop.search.n_trials=2",
-            "loop.search.n_startup=1", "loop.method.tries_per_round=1", "loop.method.pair_tries=0", "loop.method.polish_iters=0",
-            "loop.method.final_refit_iters=0", "loop.effects=[surface_contact,camera]", "loop.selftest.states=[press,twist_x]",
-            "loop.selftest.holdout=[twist_x]", "loop.generative.runs=2", "loop.generative.max_rounds=1",
-            "loop.generative.n_effects=[0,1]", "loop.generative.unlisted_share=0.5",
-            "loop.generative.dev_seeds=[2]"])
+        cfg = compose(config_name="loop", overrides=[*sizes, "track=false", "progress=false", f"out.dir={out}",
+                                                     "mode=generative"])
     res = app.run(cfg)
     table = list(csv.DictReader((out / "loop_selftest_general.csv").open()))
     assert tuple(table[0]) == gen.COLUMNS and [r["run"] for r in table] == ["0", "1"]
@@ -285,3 +285,16 @@ def test_app_generative_mode_writes_the_table(tmp_path):
     assert (out / "selftest_general.md").read_text().startswith("# Residual loop: generative self-test")
     assert json.loads((out / "selftest_general.json").read_text())["summary"]["dev"]["runs"] == 2
     assert res["summary"]["dev"]["runs"] == 2 and len(list((out / "generative" / "runs").iterdir())) == 2
+
+    # workflow/scripts/loop_verdict_rescore.py rebuilds each run's final twin from its record: on the device that made
+    # the runs, the default rule's verdict is the recorded one
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("rescore", REPO_ROOT / "workflow/scripts/loop_verdict_rescore.py")
+    rescore = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(rescore)
+    rescore.main(out / "generative" / "runs", tmp_path / "rescore.csv", sizes)
+    rows = list(csv.DictReader((tmp_path / "rescore.csv").open()))
+    assert [r["run"] for r in rows] == ["0", "1"]
+    assert [r["unexplained_twin"] for r in rows] == [r["unexplained_recorded"] for r in rows]
+    assert all(0 <= float(r["explained_by_candidates"]) <= 1 for r in rows)
