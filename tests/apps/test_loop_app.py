@@ -139,3 +139,23 @@ def test_starting_twin_is_honoured_or_refused(inputs, tmp_path):
     assert json.loads((again / "rounds.json").read_text())["effects"] == ["surface_contact"]
     with pytest.raises(ValueError, match="twin.contact.mu=0.9 acts only with contact"):
         app.run(config(inputs, tmp_path / "bad", "twin.contact.mu=0.9"))
+
+
+def test_loop_benchmark_writes_its_timing_and_refuses_a_failed_run(inputs, tmp_path):
+    """workflow/scripts/bench_loop.py at toy sizes: one JSON record of one timed run; a failing loop, one line."""
+    import subprocess
+    import sys
+
+    script = REPO_ROOT / "workflow" / "scripts" / "bench_loop.py"
+    sizes = [f"mesh={inputs / 'mesh.npz'}", "loop.max_frames=10", "loop.search.n_trials=2", "loop.search.n_startup=1",
+             "loop.holdout=[twist_x]"]
+    out = tmp_path / "bench.json"
+    run = subprocess.run([sys.executable, str(script), "--profile", "tiny", "--out", str(out),
+                          f"measured={inputs / 'good'}", *sizes], capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-2000:]
+    record = json.loads(out.read_text())
+    assert record["wall_s"] >= record["loop_s"] >= 0 and record["twin_s"] > 0 and record["cpu_affinity"] >= 1
+    assert record["loop_real_csv"].startswith(",".join(REAL_COLUMNS))
+    bad = subprocess.run([sys.executable, str(script), "--profile", "tiny", "--out", str(tmp_path / "b.json"),
+                          f"measured={tmp_path / 'nowhere'}", *sizes], capture_output=True, text=True, timeout=600)
+    assert bad.returncode != 0 and "bench_loop: the loop failed" in bad.stderr and not (tmp_path / "b.json").exists()

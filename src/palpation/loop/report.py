@@ -230,7 +230,8 @@ def real_markdown(p: Problem, decs: Mapping[str, list], baseline: Mapping[str, f
     if edge:
         L += [f"At a search bound in the final twin: {', '.join(f'{n} = {p.params[n]:.4g}' for n in edge)} "
               "(the fitted photos want more room than the stable range allows; see docs/loop.md).", ""]
-    L += ["## Attribution per round (share of the fitted residual each effect explains alone)", ""]
+    L += ["## Attribution per round (share of the fitted residual each effect explains; with "
+          "loop.method.attribute_given_refit, of what re-fitting the twin's own parameters leaves)", ""]
     for i, r in enumerate(p.rounds[1:], 1):
         if p.rounds[i - 1]["round"] == r["round"]:
             continue  # a second try of the same round shares its attribution

@@ -14,10 +14,10 @@ from pathlib import Path
 from palpation.readers import read_json
 from palpation.report import paper
 from palpation.report.loop_numbers import (
-    attribution_choice, fixed_exact_share, fixed_inlist_unexplained, fixed_summary, general_below_power,
+    attribution_choice, bench_loop, fixed_exact_share, fixed_inlist_unexplained, fixed_summary, general_below_power,
     general_by_effect, general_exact_of, general_oracle, general_shared, general_soft_e, general_split,
-    general_summary, loop_change, loop_effects, loop_last, loop_rest_ratio, loop_same_table, loop_target, reduced_converged, reduced_mae_after,
-    reduced_run_after, selftest_runs, verdict_rescore,
+    general_summary, loop_change, loop_effects, loop_last, loop_rest_ratio, loop_same_table, loop_target,
+    reduced_converged, reduced_mae_after, reduced_run_after, selftest_runs, verdict_rescore,
 )
 from palpation.report.maps_numbers import SILICONE_MEASURES, silicone_check
 from palpation.report.records import FIX, record_csv as _csv
@@ -334,6 +334,7 @@ NUMBERS: dict[str, Callable[[Path], str]] = {
                                                                   ("layered",)).items()},
     "loop.general.attribution": lambda r: attribution_choice(r, "loop_dev_attribution.json"),
     "loop.general.verdict": lambda r: verdict_rescore(r, "loop_verdict_rescore_dev.csv"),
+    "loop.bench.quick": lambda r: bench_loop(r, "bench_loop_quick_cpu.json"),
     "loop.paper.effects": lambda r: loop_effects(r, "paper/loop/loop_real.csv"),
     "loop.paper.heldout": lambda r: loop_change(r, "mae_heldout_px", "px", 4, "paper/loop/loop_real.csv"),
     "loop.paper.mae_mm": lambda r: loop_change(r, "mae_mean_mm", "mm", 4, "paper/loop/loop_real.csv"),

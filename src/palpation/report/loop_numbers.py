@@ -264,3 +264,10 @@ def verdict_rescore(results: Path, name: str) -> str:
     return (f"outside runs flagged {int(out['unexplained_candidates'].sum())} → {int(out['unexplained_twin'].sum())} "
             f"of {len(out)}, runs with the exact set flagged {int(exact['unexplained_candidates'].sum())} → "
             f"{int(exact['unexplained_twin'].sum())} of {len(exact)}")
+
+
+def bench_loop(results: Path, name: str) -> str:
+    """A loop benchmark record (workflow/scripts/bench_loop.py): its wall time and the cores it had."""
+    record = json.loads(read_text(results / name, FIX, "record"))
+    return (f"{record['wall_s']:.0f} s wall ({record['twin_s']:.0f} s in the twin) on {record['cpu_affinity']} of "
+            f"{record['cpu_count']} cores")
