@@ -1,7 +1,8 @@
 """Estimate each real slide's press depth from its unlabelled marker motion with a twin-made lookup
 (docs/transfer.md):
 
-    python -m palpation.apps.simulate set=depth_bank 'bank_depths_mm=[1,2,3,4,5,6]' out.dir=results/transfer/bank
+    python -m palpation.apps.simulate set=depth_bank 'bank_depths_mm=[1,2,3,4,5,6]' twin.contact.phantom_contact=true \
+        twin.contact.k_s=<the loop's k_s> out.dir=results/transfer/bank
     python workflow/scripts/latent_depth.py --bank results/transfer/bank/manifest.json \
         --out results/transfer/latent_depth.csv
 

@@ -126,6 +126,11 @@ def reusable(paths, key: str) -> Path | None:
 
 def run(cfg: DictConfig) -> dict:
     twin: TwinConfig = OmegaConf.to_object(cfg.twin)
+    if cfg.set == "depth_bank" and not twin.contact.phantom_contact:
+        # the reference twin has no phantom surface: a vessel-free slide then moves no marker at any depth
+        raise ValueError("set=depth_bank: the twin has no phantom surface (twin.contact.phantom_contact=false), so its "
+                         "vessel-free slides look the same at every depth; make the bank with the surface contact on, "
+                         "e.g. twin.contact.phantom_contact=true twin.contact.k_s=<the loop's fitted k_s>")
     mesh = SensorMesh.load(cfg.mesh)  # checked first: its bytes are hashed into the request key
     # quirk 4: optionally centre the k_n draws on the twin's (fitted) k_n, in reference units
     centre = twin.contact.k_n * REF_LENGTH_SCALE if cfg.dataset.recentre_k_n else None
