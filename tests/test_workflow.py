@@ -277,3 +277,16 @@ def test_paper_recipe_ablation_plan(tmp_path):
            and "palpation.apps.train" in ln]
     assert len(sim) == 9 and all("'seeds=[0,1,2,3,4]'" in ln and "'also_test=[A-to-C:meat]'" in ln for ln in sim)
     assert sum("also_uncalibrated=results/recipe/robust/calibration " in ln for ln in sim) == 1
+
+
+def test_the_spread_sim_set_is_wired_from_the_photo_loops_twin(tmp_path, default_listing):
+    """results/sim/dataset_spread (not in `rule all`): the depth bank with the photo loop's twin (its phantom
+    surface), the real slides' depths from both real sets, then simulate_dataset's draws and twin with the depths."""
+    listing = dry_run(tmp_path, "-p", "results/sim/dataset_spread/manifest.json")
+    stats = job_stats(listing)
+    assert {"depth_bank", "latent_depth", "simulate_dataset_spread", "loop", "silicone_set", "meat_set"} <= set(stats)
+    bank = next(line for line in listing.splitlines() if "set=depth_bank" in line)
+    assert "file://results/loop]" in bank and "+twin_fit=fitted" in bank
+    spread = next(line for line in listing.splitlines() if "SNAKEMAKE_RULE=simulate_dataset_spread" in line)
+    assert "set=randomised" in spread and "dataset.depths_from=results/transfer/latent_depth.csv" in spread
+    assert not {"depth_bank", "latent_depth", "simulate_dataset_spread"} & set(job_stats(default_listing))

@@ -26,6 +26,7 @@ rule simulate_dataset:
         fit_args=lambda wildcards, input: fit_overrides(input.fit),
         source=f"dataset.twin={DATASET_TWIN}",  # logged: which twin, chosen or pinned
         reuse=lambda wildcards, input: "'reuse=[" + ",".join(getattr(input, "reuse", [])) + "]'",
+        extra="",  # further app overrides of a variant (transfer.smk: the depths of simulate_dataset_spread)
     # the main Sim set is on the paper profile's critical path (loop -> Sim set -> training): it takes the next GPU
     # slot before the ablations' jobs (a device run lost 20 s to a twin-ablation training taking it first)
     priority: 10
@@ -42,7 +43,7 @@ rule simulate_dataset:
         " SNAKEMAKE_RULE={params.rule} {params.py} palpation.apps.simulate set=randomised"
         " n_pairs={params.n_pairs} seed={params.seed}"
         " dataset.recentre_k_n={params.recentre}"
-        " {params.twin} {params.fit_args} {params.reuse} mesh={input.mesh} out.dir={params.outdir}"
+        " {params.twin} {params.fit_args} {params.reuse} {params.extra} mesh={input.mesh} out.dir={params.outdir}"
         " {params.hydra} >> {log} 2>&1"
 
 
