@@ -121,17 +121,22 @@ def simulate_mimic(jobs):
     return np.stack([mimic(s, p) for s, p in jobs]), np.zeros(len(jobs), bool)
 
 
+def e_only_problem() -> Problem:
+    """Data that differ from the twin by E alone (1.5 steps stiffer, with noise); the anchor is the one candidate."""
+    rng = np.random.default_rng(0)
+    full = initial_params({"E": E0 * 1.25 ** 1.5, "alpha": 0.02})
+    targets = [Target(State(n, "press", 2.0), mimic(State(n, "press"), full) + rng.normal(0, NOISE, REST.shape),
+                      n != "h") for n in AMP]
+    return Problem("toy", "key", targets, initial_params({"E": E0, "alpha": 0.02}), ["E"],
+                   candidates=["marker_anchor"], noise_px=NOISE)
+
+
 @pytest.mark.parametrize("refit_starts", [1, 3])
 def test_the_final_refit_also_starts_from_the_last_null_try(tmp_path, refit_starts):
     # contact + mount, run 31 of the 60-run self-test: round 2 kept nothing, its null try (the same set
     # re-fitted) reached the noise, and the final twin stayed at the round-1 fit; now its end point is a start.
     # Here the data differ from the twin by E alone; the anchor mimics it and is refused against the null try
-    rng = np.random.default_rng(0)
-    full = initial_params({"E": E0 * 1.25 ** 1.5, "alpha": 0.02})
-    targets = [Target(State(n, "press", 2.0), mimic(State(n, "press"), full) + rng.normal(0, NOISE, REST.shape),
-                      n != "h") for n in AMP]
-    p = Problem("toy", "key", targets, initial_params({"E": E0, "alpha": 0.02}), ["E"],
-                candidates=["marker_anchor"], noise_px=NOISE)
+    p = e_only_problem()
     # the attribution alone: given the re-fit columns it would try nothing here (E's column explains the residual)
     cfg = LoopConfig(effects=["marker_anchor"], search=SearchSettings(sampler="random", n_trials=8, n_startup=8),
                      method=Method(compete=True, final_refit_starts=refit_starts, attribute_given_refit=False)).validate()
@@ -147,12 +152,7 @@ def test_the_final_refit_also_starts_from_the_last_null_try(tmp_path, refit_star
 def test_given_the_refit_columns_an_effect_that_mimics_e_is_not_tried(tmp_path):
     """The same data (they differ from the twin by E alone): held with E's column, the anchor explains nothing of
     the residual, so the round tries no effect and ends (loop.method.attribute_given_refit, the default)."""
-    rng = np.random.default_rng(0)
-    full = initial_params({"E": E0 * 1.25 ** 1.5, "alpha": 0.02})
-    targets = [Target(State(n, "press", 2.0), mimic(State(n, "press"), full) + rng.normal(0, NOISE, REST.shape),
-                      n != "h") for n in AMP]
-    p = Problem("toy", "key", targets, initial_params({"E": E0, "alpha": 0.02}), ["E"],
-                candidates=["marker_anchor"], noise_px=NOISE)
+    p = e_only_problem()
     cfg = LoopConfig(effects=["marker_anchor"], search=SearchSettings(sampler="random", n_trials=8, n_startup=8)
                      ).validate()
     assert cfg.method.attribute_given_refit
