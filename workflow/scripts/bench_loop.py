@@ -17,6 +17,7 @@ import json
 import os
 import platform
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -30,7 +31,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--profile", default="quick", choices=("quick", "paper", "tiny"))
     ap.add_argument("--out", type=Path, required=True, help="the JSON record")
+    ap.add_argument("--keep", type=Path, help="a new folder the timed run's outputs are copied to (its report)")
     args, overrides = ap.parse_known_args()
+    if args.keep is not None and args.keep.exists():
+        raise SystemExit(f"bench_loop: --keep {args.keep} exists; name a new folder")
     with tempfile.TemporaryDirectory(prefix="bench_loop_") as tmp:
         cmd = [sys.executable, "-m", "palpation.apps.loop", f"loop={args.profile}", f"out.dir={tmp}/out",
                f"hydra.run.dir={tmp}/hydra", "track=false", "progress=false", *overrides]
@@ -42,6 +46,9 @@ def main() -> None:
             tail = log.strip().splitlines()[-1] if log.strip() else "no output"
             raise SystemExit(f"bench_loop: the loop failed (exit {run.returncode}): {tail}")
         table = (Path(tmp) / "out" / "loop_real.csv").read_text()
+        if args.keep is not None:
+            shutil.copytree(Path(tmp) / "out", args.keep)
+            (args.keep / "loop.log").write_text(log)
     found = DONE.search(log)
     if not found:
         raise SystemExit("bench_loop: no 'loop real done in' line in the app's log; the app's log format changed")

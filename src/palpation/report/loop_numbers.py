@@ -45,11 +45,13 @@ def loop_same_table(results: Path, a: str, b: str) -> str:
 
 def loop_rest_ratio(results: Path, name: str) -> str:
     """The final residual against the detector noise, as the loop's report.md states it: only Markdown holds it,
-    so it is read from the verdict's one line "the rest is N× the noise" (an error if that line is gone)."""
+    so it is read from the verdict's one line "beyond the final twin's own parameters N× the noise" (or, under
+    loop.method.unexplained_beyond=candidates, "the rest is N× the noise"; an error if that line is gone)."""
     text = read_text(results / name, FIX, "record")
-    found = re.findall(r"the rest is ([0-9]+(?:\.[0-9]+)?)\s*×\s*the noise", text)
+    found = re.findall(r"(?:the rest is|beyond the final twin's own parameters) ([0-9]+(?:\.[0-9]+)?)\s*×\s*the noise",
+                       text)
     if len(found) != 1:
-        raise ValueError(f"record {results / name}: expected one 'the rest is N× the noise' line, found {len(found)}")
+        raise ValueError(f"record {results / name}: expected one 'N× the noise' line in the verdict, found {len(found)}")
     return f"{found[0]}×"
 
 
