@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 from palpation.loop.attribution import Signature, joint_candidates
-from palpation.loop.gate import clusters, decide, heldout_z
+from palpation.loop.gate import beyond_null, clusters, decide, heldout_z
 from palpation.loop.unexplained import discrepancy, laplace, noise_estimate, residual_test
 from palpation.loop.effects import EFFECTS
+from palpation.loop.method import Method
 from palpation.markers.template import rest_template
 from palpation.measured import MeasuredState, make_measured_set
 
@@ -57,6 +58,17 @@ def test_gate_weighs_the_heldout_against_its_noise():
     assert not decide(b, {"fit": 2.3, "heldout": 1.0}, flat, 0.05, 0.05, 0.3, 2.0)[0]  # nothing gained
     assert decide({"fit": 2.0, "heldout": float("nan")}, {"fit": 1.0, "heldout": float("nan")}, {}, 0.05, 0.05,
                   0.3, 2.0)[0]
+
+
+@pytest.mark.parametrize("escape", [False, True])
+def test_a_fit_that_refitting_alone_cannot_reach_goes_beyond_the_null(escape):
+    # the soft-E null: re-fitting alone fits worse (12.8 px) but suits the held-out state better than the effect does
+    method = Method(null_fit_escape=escape)
+    null, worse_heldout = {"fit": 12.8, "heldout": 34.5}, {"z": -4.5}
+    assert beyond_null(null, {"fit": 7.3, "heldout": 42.5}, worse_heldout, method)[0] == escape  # fit 43 % lower
+    assert not beyond_null(null, {"fit": 10.5, "heldout": 36.2}, {"z": -0.5}, method)[0]  # 18 %: below gate_fit_rel
+    # where decide accepts, the escape changes nothing
+    assert beyond_null(null, {"fit": 12.0, "heldout": 30.0}, {"z": 3.0}, method)[0]
 
 
 def test_residual_test_tells_noise_from_structure():

@@ -24,7 +24,7 @@ from palpation.loop.attribution import Signature, attribute, fit_subset, joint_c
 from palpation.loop.compete import Winner, enter
 from palpation.loop.config import LoopConfig
 from palpation.loop.effects import EFFECTS, PARAMS, Dof, bounds, clip, move
-from palpation.loop.gate import decide, heldout_z
+from palpation.loop.gate import beyond_null, decide, heldout_z
 from palpation.loop.problem import Problem, evaluate
 from palpation.loop.projected import recheck
 from palpation.loop.recalibrate import recalibrate
@@ -259,8 +259,7 @@ def run_rounds(problems: list[Problem], simulate, cfg: LoopConfig, db_path: Path
                     n_sum, n_markers, n_fit = nulls[p.name]
                     ev0 = heldout_z([p.targets[i].markers for i in held], [n_markers[i] for i in held],
                                     [p.markers[i] for i in held])
-                    ok0, why0 = decide(n_sum, a, ev0, cfg.method.min_improvement_px, cfg.method.min_improvement_rel,
-                                       cfg.method.gate_fit_rel, cfg.method.gate_z)
+                    ok0, why0 = beyond_null(n_sum, a, ev0, cfg.method)
                     after["gate_null"] = {**ev0, "why": why0, "fit": n_sum["fit"], "heldout": n_sum["heldout"],
                                           "params": n_fit["params_final"],
                                           "converged": n_fit.get("polish", {}).get("converged")}

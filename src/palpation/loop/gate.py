@@ -12,6 +12,12 @@ cluster means (the centre disc and 8 angular sectors of the ring, per held-out s
   improvement on the fitted states (issue 13.3: the camera shift recovered to 0.1 px, held-out +0.4 px);
 * otherwise rejected.
 Without held-out states the fitted MAE alone decides (by min(px, rel)).
+
+Against a null (re-fitting the twin's own parameters alone, loop.refit and loop.projected), `beyond_null` applies the
+same rule; with loop.method.null_fit_escape an effect whose fitted MAE ends `fit_rel` below the null's also goes
+beyond it, whatever the held-out says: the null guards against an effect that only wins by re-fitting, and a fit
+that re-fitting alone cannot reach is not that. It matters where both twins are far from the data and re-fitting
+alone drifts to a soft E that happens to suit the held-out state better (contact + friction + another effect).
 """
 
 from __future__ import annotations
@@ -64,3 +70,14 @@ def decide(before: dict, after: dict, evidence: dict, min_px: float, min_rel: fl
     if fit_gain >= fit_rel and abs(z) <= z_crit:
         return True, f"{held}: within its noise, fit fell {fit_gain:.0%} (>= {fit_rel:.0%})"
     return False, f"{held}: not better, fit fell {fit_gain:.0%}"
+
+
+def beyond_null(null: dict, after: dict, evidence: dict, method) -> tuple[bool, str]:
+    """(accepted, why): whether a try goes beyond re-fitting alone (the null's summary), by decide's rule or, with
+    method.null_fit_escape, by a fit method.gate_fit_rel below the null's (module docstring)."""
+    ok, why = decide(null, after, evidence, method.min_improvement_px, method.min_improvement_rel,
+                     method.gate_fit_rel, method.gate_z)
+    gain = 1.0 - after["fit"] / null["fit"] if null["fit"] > 0 else 0.0
+    if not ok and method.null_fit_escape and gain >= method.gate_fit_rel:
+        return True, f"{why}, but the fit is {gain:.0%} below re-fitting alone's (>= {method.gate_fit_rel:.0%})"
+    return ok, why

@@ -23,7 +23,7 @@ import logging
 from dataclasses import replace
 
 from palpation.loop.effects import EFFECTS
-from palpation.loop.gate import decide, heldout_z
+from palpation.loop.gate import beyond_null, heldout_z
 from palpation.loop.polish import polish
 from palpation.loop.problem import evaluate
 from palpation.loop.refit import refit_kept
@@ -68,7 +68,6 @@ def recheck(cfg, problems: list, winners: dict, before: dict, simulate) -> dict[
     starts.update({v.name: [dict(v.params), *w.starts] for _, w, _, v in pairs})
     res = polish(probs, starts, simulate, limits, iters)
     diverged = evaluate(probs, simulate, strict=False)
-    args = (cfg.method.min_improvement_px, cfg.method.min_improvement_rel, cfg.method.gate_fit_rel, cfg.method.gate_z)
     out = {}
     for p, w, q, v in pairs:
         held = [i for i, t in enumerate(p.targets) if not t.fit]
@@ -82,7 +81,7 @@ def recheck(cfg, problems: list, winners: dict, before: dict, simulate) -> dict[
             continue
         n_sum = q.summary()
         ev = heldout_z(real, [q.markers[i] for i in held], [w.markers[i] for i in held])
-        ok, why = decide(n_sum, w.summary, ev, *args)
+        ok, why = beyond_null(n_sum, w.summary, ev, cfg.method)
         out[p.name] = {**ev, "ok": ok, "why": why, "fit": n_sum["fit"], "heldout": n_sum["heldout"],
                        "params": dict(q.params), "converged": res[q.name].get("converged"),
                        "winner_fit": w.summary["fit"], "winner_heldout": w.summary["heldout"]}

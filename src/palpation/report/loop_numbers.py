@@ -249,8 +249,8 @@ def general_split(stem: str, log_name: str, effects: tuple[str, ...] = ("layered
     return keys
 
 
-def attribution_choice(results: Path, name: str) -> str:
-    """The dev comparison that chose the attribution given the re-fit columns (workflow/scripts/loop_dev_choice.py)."""
+def dev_choice(results: Path, name: str) -> str:
+    """A dev comparison of the default loop and one changed method (workflow/scripts/loop_dev_choice.py)."""
     record = json.loads(read_text(results / name, FIX, "record"))
     a, b = record["counts"]["default"], record["counts"]["changed"]
     return (f"exact {a['exact']} → {b['exact']} of {a['in_list']}, outside `unexplained` {a['outside_unexplained']} → "
