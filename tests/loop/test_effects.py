@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from palpation.loop.effects import EFFECTS, PARAMS, clip, defaults, move, split, twin_overrides
+from palpation.loop.effects import EFFECTS, PARAMS, clip, defaults, move, split, strength, twin_overrides
 from palpation.loop.problem import initial_params
 
 
@@ -37,3 +37,14 @@ def test_split_and_overrides_carry_units_and_switches():
     with pytest.raises(ValueError, match="unknown loop parameter 'young'"):
         split({"young": 1.0})
     assert np.isfinite(list(initial_params({}).values())).all()
+
+
+@pytest.mark.parametrize("effect", sorted(EFFECTS))
+def test_strength_reads_back_the_steps_an_effect_was_moved(effect):
+    off = initial_params({})
+    assert strength(effect, off) == 0.0
+    params = dict(off)
+    for dof, beta in zip(EFFECTS[effect].dofs, (0.6, -0.8, 0.5, 0.3)):
+        params = move(params, dof, abs(beta) if dof.nonneg else beta)
+    betas = [abs(b) for b in (0.6, -0.8, 0.5, 0.3)[:len(EFFECTS[effect].dofs)]]
+    assert strength(effect, params) == pytest.approx(np.sqrt(sum(b * b for b in betas)))

@@ -74,3 +74,21 @@ def test_taking_out_contact_takes_out_friction_with_it():
     p = Problem("t", "k", [], initial_params({}), [], effects=["surface_contact", "friction", "camera"])
     assert removal_set(p, "surface_contact") == ["surface_contact", "friction"]
     assert removal_set(p, "camera") == ["camera"]
+
+
+def test_a_negligible_effect_goes_before_any_test():
+    # a 0.05-step mount tilt (0.1 deg of a 2-deg step): the data hold it (a strong toy field, noise 0.1 px), so the
+    # removal test alone would keep it; below the floor of 0.1 nominal steps it goes untested
+    truth = {"cam_dx_px": 5.0, "mount_tilt_x_deg": 0.1}
+    AMP.update(a=300.0, b=200.0, h=250.0)
+    try:
+        tested = problem(truth, truth, ["camera", "mount"])
+        prune([tested], simulate, {"toy": None}, iters=0, z_crit=2.0)
+        assert tested.effects == ["camera", "mount"]  # significant at this noise
+        floored = problem(truth, truth, ["camera", "mount"])
+        prune([floored], simulate, {"toy": None}, iters=0, z_crit=2.0, min_steps=0.1)
+    finally:
+        AMP.update(a=3.0, b=2.0, h=2.5)
+    assert floored.effects == ["camera"] and floored.parsimony["negligible"] == ["mount"]
+    assert floored.params["mount_tilt_x_deg"] == 0.0 and floored.markers is not None
+    assert "mount" not in floored.parsimony["passes"][0]  # never tested

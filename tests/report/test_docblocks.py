@@ -86,9 +86,9 @@ def test_a_changed_selftest_record_makes_the_loop_page_stale(tmp_path):
 
 def test_a_markdown_record_without_its_line_is_an_error(tmp_path):
     root = repo_copy(tmp_path)
-    report = root / "docs" / "results" / "paper" / "loop" / "report.md"
-    report.write_text(report.read_text().replace("the rest is", "the remainder is"))
-    with pytest.raises(ValueError, match="the rest is N× the noise"):
+    report = root / "docs" / "results" / "paper" / "loop_method" / "report.md"
+    report.write_text(report.read_text().replace("beyond the final twin's own parameters", "beyond the final twin"))
+    with pytest.raises(ValueError, match="'N× the noise' line"):
         docblocks.run(root)
 
 

@@ -125,6 +125,24 @@ def move(params: Mapping[str, float], dof: Dof, beta: float = 1.0, overrides: Ma
     return out
 
 
+def strength(effect: str, params: Mapping[str, float]) -> float:
+    """How far `params` hold `effect` from off, in nominal steps (move's inverse): over its dofs, the root sum of
+    squares of each dof's largest |beta| among the parameters it moves."""
+    total = 0.0
+    for dof in EFFECTS[effect].dofs:
+        beta = 0.0
+        for name, mode, amount in dof.moves:
+            off, value = PARAMS[name].default, params.get(name, PARAMS[name].default)
+            if mode == "add":
+                beta = max(beta, abs(value - off) / amount)
+            elif value > 0 and off > 0:
+                beta = max(beta, abs(np.log(value / off) / np.log(amount)))
+            elif value != off:
+                beta = float("inf")
+        total += beta * beta
+    return float(np.sqrt(total))
+
+
 def bounds(name: str, overrides: Mapping[str, Sequence[float]] | None = None) -> tuple[float, float]:
     """Search bounds of a parameter; `overrides` (loop.search.bounds) replace effects.py's per name."""
     if overrides and name in overrides:

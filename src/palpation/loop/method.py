@@ -76,6 +76,10 @@ class Method:
     #   all          that re-fit test for every set (generative dev seed 0, 12 CPU runs: exact sets 8 -> 7 of 10);
     #   off          the rounds' names stand
     prune: str = ranged("inert", Choice(*PRUNE_MODES))
+    # before those tests, an added effect held less than this many nominal steps from off goes (loop.parsimony): a
+    # nominal step is the loop's unit of a detectable change, and no effect injected on any dev record was fitted
+    # below 0.25 of one (workflow/scripts/loop_strength_floor.py)
+    min_strength_steps: float = ranged(0.1, Num(ge=0))
     # a guard against the soft-E basin: for sets still above unexplained_ratio x the noise after the final refit, LM
     # once more from its end point with E (and the contact stiffness, where contact is on) scaled by each factor
     stiffness_starts: list[float] = ranged(rule=ListOf(Num(gt=0), 0), factory=lambda: [2.0, 0.5])

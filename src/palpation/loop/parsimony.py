@@ -9,7 +9,10 @@ every added effect (with the effects that act through it: friction goes with con
 2. else the rest re-fitted from there (LM, loop.polish, final_refit_iters steps): if the held-out states (the fitted
    ones where the set has none) are then not significantly worse than the final twin's, the effect was not
    needed and goes.
-The least needed effect goes first and the rest are tested again; an effect that goes leaves the named set, the
+Before both, an added effect held less than loop.method.min_strength_steps nominal steps from off (effects.strength;
+surface contact aside, see CARRIERS) goes without a test: a significance test at a noise floor this low would keep a term of hundredths of a millimetre
+that only evens out what the rest's fit left (its uncertainty is smaller still). The least needed effect goes first
+and the rest are tested again; an effect that goes leaves the named set, the
 searched parameters and the twin file (its parameters back at their off values). Effects the starting twin had
 are not judged. Each problem's record lands in p.parsimony. Which sets get step 2 is loop.method.prune's choice
 (loop.unexplained.check_all): none ("inert": step 1 only), the sets still above the noise, or all.
@@ -21,12 +24,15 @@ import copy
 import logging
 from typing import Callable, Mapping
 
-from palpation.loop.effects import EFFECTS, PARAMS
+from palpation.loop.effects import EFFECTS, PARAMS, strength
 from palpation.loop.gate import heldout_z
 from palpation.loop.polish import polish
 from palpation.loop.problem import evaluate
 
 log = logging.getLogger(__name__)
+# effects others act through (surface contact): their parameter switches a mechanism on, it does not measure its size
+# (any contact stiffness brings the surface into play), so only the removal tests judge them
+CARRIERS = {r for e in EFFECTS.values() for r in e.requires}
 
 
 def added_effects(p) -> list[str]:
@@ -87,11 +93,33 @@ def needed(problems: list, simulate, limits: Mapping[str, Mapping | None], iters
     return out, {(p.name, e): (q, removal_set(p, e)) for p, e, q in tests}
 
 
-def prune(problems: list, simulate, limits: Mapping[str, Mapping | None], iters: int, z_crit: float) -> None:
-    """Take out, one at a time and least needed first, every added effect the final twin does not need (see the
-    module docstring); p.parsimony records each pass's tests and what went."""
+def drop_negligible(problems: list, simulate, min_steps: float) -> None:
+    """Take out every added effect held less than `min_steps` nominal steps from off, with what acts only through
+    it when that is negligible too (p.parsimony["negligible"])."""
+    changed = []
+    for p in problems:
+        small = [e for e in added_effects(p) if e not in CARRIERS
+                 and all(strength(x, p.params) < min_steps for x in removal_set(p, e))]
+        gone = list(dict.fromkeys(x for e in small for x in removal_set(p, e)))
+        if gone:
+            q = without(p, gone)
+            p.params, p.effects, p.searched, p.markers = q.params, q.effects, q.searched, None
+            p.parsimony["dropped"] += gone
+            p.parsimony["negligible"] = gone
+            changed.append(p)
+            log.info("loop '%s': %s taken out of the final twin, negligible (< %.2g nominal steps from off)", p.name,
+                     "+".join(gone), min_steps)
+    if changed:
+        evaluate(changed, simulate)
+
+
+def prune(problems: list, simulate, limits: Mapping[str, Mapping | None], iters: int, z_crit: float,
+          min_steps: float = 0.0) -> None:
+    """Take out the negligible added effects, then, one at a time and least needed first, every added effect the
+    final twin does not need (see the module docstring); p.parsimony records each pass's tests and what went."""
     for p in problems:
         p.parsimony = {"passes": [], "dropped": []}
+    drop_negligible(problems, simulate, min_steps)
     todo = [p for p in problems if added_effects(p)]
     while todo:
         tests, shadows = needed(todo, simulate, limits, iters, z_crit)

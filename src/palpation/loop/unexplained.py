@@ -199,7 +199,8 @@ def check_all(problems: list, simulate, cfg, sigmas: Mapping[str, float]) -> Non
         for group, iters in (([p for p in problems if p.name not in refit], 0),
                              ([p for p in problems if p.name in refit], m.final_refit_iters)):
             if group:
-                prune(group, simulate, {p.name: {**limits, **p.trust} for p in group}, iters, m.gate_z)
+                prune(group, simulate, {p.name: {**limits, **p.trust} for p in group}, iters, m.gate_z,
+                      m.min_strength_steps)
     stale = [p for p in problems if p.last_signatures is None or p.last_signatures["params"] != p.params]
     for p in stale:
         p.refit = refit_dofs(p)

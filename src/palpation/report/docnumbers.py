@@ -14,10 +14,10 @@ from pathlib import Path
 from palpation.readers import read_json
 from palpation.report import paper
 from palpation.report.loop_numbers import (
-    dev_choice, bench_loop, fixed_exact_share, fixed_inlist_unexplained, fixed_summary, general_below_power,
+    bench_loop, dev_choice, fixed_exact_share, fixed_inlist_unexplained, fixed_summary, general_below_power,
     general_by_effect, general_exact_of, general_oracle, general_shared, general_soft_e, general_split,
     general_summary, loop_change, loop_effects, loop_last, loop_rest_ratio, loop_same_table, loop_target,
-    reduced_converged, reduced_mae_after, reduced_run_after, selftest_runs, verdict_rescore,
+    reduced_converged, reduced_mae_after, reduced_run_after, selftest_runs, strength_floor, verdict_rescore,
 )
 from palpation.report.maps_numbers import SILICONE_MEASURES, silicone_check
 from palpation.report.records import FIX, record_csv as _csv
@@ -330,10 +330,12 @@ NUMBERS: dict[str, Callable[[Path], str]] = {
     **{f"loop.general.test{k}": v for k, v in general_split("loop_selftest_general",
                                                              "loop_selftest_general_test.log").items()},
     **{f"loop.general.prev_test{k}": v for k, v in general_split("loop_selftest_general_seed1001",
-                                                                  "loop_selftest_general_seed1001_test.log").items()},
+                                                                  "loop_selftest_general_seed1001_test.log",
+                                                                  ("layered",)).items()},
     "loop.general.attribution": lambda r: dev_choice(r, "loop_dev_attribution.json"),
     "loop.general.verdict": lambda r: verdict_rescore(r, "loop_verdict_rescore_dev.csv"),
     "loop.general.null_escape": lambda r: dev_choice(r, "loop_dev_null_escape.json"),
+    "loop.general.strength_floor": lambda r: strength_floor(r, "loop_strength_floor_dev.csv"),
     "loop.bench.quick": lambda r: bench_loop(r, "bench_loop_quick_cpu.json"),
     "loop.bench.paper": lambda r: bench_loop(r, "bench_loop_paper_gpu.json"),
     "loop.paper.effects": lambda r: loop_effects(r, "paper/loop_method/loop_real.csv"),

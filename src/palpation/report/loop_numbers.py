@@ -273,3 +273,13 @@ def bench_loop(results: Path, name: str) -> str:
     record = json.loads(read_text(results / name, FIX, "record"))
     return (f"{record['wall_s']:.0f} s wall ({record['twin_s']:.0f} s in the twin) on {record['cpu_affinity']} of "
             f"{record['cpu_count']} cores")
+
+
+def strength_floor(results: Path, name: str, floor: float = 0.1) -> str:
+    """What the verdict's strength floor takes out of the dev records (workflow/scripts/loop_strength_floor.py)."""
+    table = _csv(results, name, ("record", "effect", "injected", "strength_fitted"))
+    true, spurious = table[table["injected"]], table[~table["injected"]]
+    harm = int((true["strength_fitted"] < floor).sum())
+    return (f"of {len(true)} injected effects named, the smallest fitted at {true['strength_fitted'].min():.2f} "
+            f"steps, {harm or 'none'} below the floor; of {len(spurious)} spurious ones, "
+            f"{int((spurious['strength_fitted'] < floor).sum())} taken out, over {table['record'].nunique()} records")
