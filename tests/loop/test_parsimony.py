@@ -7,6 +7,7 @@ from palpation.loop.effects import EFFECTS
 from palpation.loop.inputs import Target
 from palpation.loop.parsimony import added_effects, prune, removal_set
 from palpation.loop.problem import Problem, evaluate, initial_params
+from palpation.loop.report import verdict_lines
 from palpation.loop.simulate import State
 from palpation.markers.template import rest_template
 
@@ -92,3 +93,7 @@ def test_a_negligible_effect_goes_before_any_test():
     assert floored.effects == ["camera"] and floored.parsimony["negligible"] == ["mount"]
     assert floored.params["mount_tilt_x_deg"] == 0.0 and floored.markers is not None
     assert "mount" not in floored.parsimony["passes"][0]  # never tested
+    floored.rounds = [{**r, "effect": r["effects"][0], "after": {"gate": {"why": "toy"}}} for r in floored.rounds]
+    text = "\n".join(verdict_lines(floored, {"mean_px": 0.5, "target_mm": 0.25, "target_set": "toy"}))
+    assert "negligible (closer to off than loop.method.min_strength_steps nominal steps): mount;" in text
+    assert "not significantly needed" not in text  # the report says why it went

@@ -101,7 +101,11 @@ def verdict_lines(p: Problem, meta: Mapping) -> list[str]:
     L = ["## Verdict", "",
          f"* Effects found: {found or '**none**'}" + (f"; the starting twin already had {', '.join(start)}"
                                                      if start else "") + "."]
-    dropped = (p.parsimony or {}).get("dropped", [])
+    small = (p.parsimony or {}).get("negligible", [])
+    dropped = [e for e in (p.parsimony or {}).get("dropped", []) if e not in small]
+    if small:  # loop.parsimony: kept by a round, ended within loop.method.min_strength_steps of off
+        L.append(f"* Taken out after the final refit, negligible (closer to off than loop.method.min_strength_steps "
+                 f"nominal steps): {', '.join(small)}; not in the fitted twin.")
     if dropped:  # loop.parsimony: kept by a round, not needed by the final twin
         L.append(f"* Taken out after the final refit, not significantly needed by the final twin (loop.parsimony): "
                  f"{', '.join(dropped)}; not in the fitted twin.")
