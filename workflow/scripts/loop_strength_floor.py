@@ -20,42 +20,27 @@ from pathlib import Path
 import pandas as pd
 
 from palpation.loop.effects import EFFECTS, strength
-
-VERDICTS = ("none", "", "unexplained")
-
-
-def effects_of(text: str) -> list[str]:
-    """The in-list effects of a '+'-joined record field."""
-    return [e for e in str(text).split("+") if e not in VERDICTS and not e.startswith("unlisted:")]
+from palpation.report.loop_numbers import selftest_runs
 
 
-def rows_of(path: Path) -> list[dict]:
-    table = pd.read_csv(path).fillna("")
-    rows = []
-    for r in table.itertuples():
-        injected, fitted, true = set(effects_of(r.effects_injected)), json.loads(r.params_fitted), json.loads(r.params_true)
-        for e in effects_of(r.effects_named):
-            if e == "surface_contact" or not all(n in fitted for n in EFFECTS[e].params):
-                continue
-            rows.append({"record": path.name, "seed": r.seed, "run": r.run, "effect": e, "injected": e in injected,
-                         "outside": "unlisted:" in r.effects_injected,
+def scored(path: Path, floor: float) -> tuple[list[dict], tuple[int, int, int]]:
+    """A record's rows (every named effect but surface contact, whose parameters the record holds) and its in-list
+    runs: exact as recorded, exact once the effects below `floor` are taken out, in all. The runs are read as the
+    docs' numbers read them (report.loop_numbers.selftest_runs)."""
+    rows, before, after, n = [], 0, 0, 0
+    for r in selftest_runs(path.parent, path.name):
+        fitted, true = json.loads(r["params_fitted"]), json.loads(r["params_true"])
+        named = [e for e in str(r["effects_named"]).split("+") if e in r["named"]]  # in the record's order
+        judged = [e for e in named if e != "surface_contact" and all(name in fitted for name in EFFECTS[e].params)]
+        for e in judged:
+            rows.append({"record": path.name, "seed": r["seed"], "run": r["run"], "effect": e,
+                         "injected": e in r["injected"], "outside": r["unlisted"],
                          "strength_fitted": round(strength(e, fitted), 4),
-                         "strength_true": round(strength(e, true), 4) if e in injected else None})
-    return rows
-
-
-def exact_after(path: Path, floor: float) -> tuple[int, int, int]:
-    """In-list runs of a record: exact as recorded, exact once the effects below `floor` are taken out, in all."""
-    table = pd.read_csv(path).fillna("")
-    table = table[~table.effects_injected.str.contains("unlisted:")]
-    before = after = 0
-    for r in table.itertuples():
-        injected, fitted, named = set(effects_of(r.effects_injected)), json.loads(r.params_fitted), effects_of(r.effects_named)
-        kept = {e for e in named if e == "surface_contact" or not all(n in fitted for n in EFFECTS[e].params)
-                or strength(e, fitted) >= floor}
-        before += set(named) == injected
-        after += kept == injected
-    return before, after, len(table)
+                         "strength_true": round(strength(e, true), 4) if e in r["injected"] else None})
+        if not r["unlisted"]:
+            kept = set(named) - {e for e in judged if strength(e, fitted) < floor}
+            before, after, n = before + (set(named) == r["injected"]), after + (kept == r["injected"]), n + 1
+    return rows, (before, after, n)
 
 
 def main() -> None:
@@ -64,7 +49,8 @@ def main() -> None:
     ap.add_argument("records", type=Path, nargs="+")
     ap.add_argument("--floor", type=float, default=0.1, help="nominal steps (loop.method.min_strength_steps)")
     args = ap.parse_args()
-    table = pd.DataFrame([row for path in args.records for row in rows_of(path)])
+    records = {path: scored(path, args.floor) for path in args.records}
+    table = pd.DataFrame([row for rows, _ in records.values() for row in rows])
     table.to_csv(args.out, index=False)
     below = table[table.strength_fitted < args.floor]
     true = table[table.injected]
@@ -72,8 +58,7 @@ def main() -> None:
           f"{len(true)}, smallest fitted {true.strength_fitted.min():.3f} steps, taken out "
           f"{int(below.injected.sum())}; spurious named {int((~table.injected).sum())}, taken out "
           f"{int((~below.injected).sum())}")
-    for path in args.records:
-        before, after, n = exact_after(path, args.floor)
+    for path, (_, (before, after, n)) in records.items():
         print(f"  {path.name}: exact in-list {before} -> {after} of {n}")
 
 

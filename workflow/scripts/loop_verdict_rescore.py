@@ -20,6 +20,7 @@ import pandas as pd
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
+from palpation.apps.loop import loop_simulator
 from palpation.loop.config import LoopConfig
 from palpation.loop.engine import refit_dofs, signatures
 from palpation.loop.inputs import load_targets
@@ -27,11 +28,8 @@ from palpation.loop.problem import evaluate
 from palpation.loop.real import make_problem
 from palpation.loop.selftest.fixed import base_for
 from palpation.loop.selftest.generative import run_sets
-from palpation.loop.simulate import LoopSimulator, loop_twin_config
-from palpation.loop.start import nominal_projection
 from palpation.loop.unexplained import final_check, noise_estimate
 from palpation.loop.unlisted import twin_rest
-from palpation.markers.template import rest_template
 from palpation.measured import load_measured_set
 from palpation.paths import REPO_ROOT
 from palpation.twin.config import TwinConfig
@@ -47,9 +45,7 @@ def main(runs_dir: Path, out_csv: Path, overrides: list[str]) -> None:
                      key=lambda r: (r["seed"], r["run"]))
     mset = load_measured_set(cfg.measured)
     mesh = SensorMesh.load(cfg.mesh)
-    tw = loop_twin_config(nominal_projection(twin), loop.shell_thickness_mm * 1e-3)
-    sim = LoopSimulator(mesh, tw, rest_template(), device=twin.device, split_by_kind=loop.split(twin.device),
-                        max_frames=loop.max_frames)
+    _, sim = loop_simulator(twin, loop, mesh)
     template = load_targets(mset, str(cfg.measured), [], loop.selftest.states, loop.twist_z_angle)
     geometry = {s.name: s for s in mset.states}
     binding_rest = sim.binding({}).anchor_px

@@ -65,6 +65,13 @@ def _log(metrics: dict, step: int | None = None, track: bool = True) -> None:
         log_metrics({k: v for k, v in metrics.items() if np.isfinite(v)}, step=step)
 
 
+def loop_simulator(twin: TwinConfig, loop: LoopConfig, mesh: SensorMesh) -> tuple[TwinConfig, LoopSimulator]:
+    """The loop's twin (the nominal projection with the loop's shell) and the simulator every mode runs it in."""
+    tw = loop_twin_config(nominal_projection(twin), loop.shell_thickness_mm * 1e-3)
+    return tw, LoopSimulator(mesh, tw, rest_template(), device=twin.device, split_by_kind=loop.split(twin.device),
+                             max_frames=loop.max_frames)
+
+
 def run(cfg: DictConfig) -> dict:
     if cfg.mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got '{cfg.mode}'")
@@ -91,9 +98,7 @@ def run(cfg: DictConfig) -> dict:
         if cfg.mode == "generative":
             loop.generative.validate(loop)
     mesh = SensorMesh.load(cfg.mesh)
-    tw = loop_twin_config(nominal_projection(twin), loop.shell_thickness_mm * 1e-3)
-    sim = LoopSimulator(mesh, tw, rest_template(), device=twin.device, split_by_kind=loop.split(twin.device),
-                        max_frames=loop.max_frames)
+    tw, sim = loop_simulator(twin, loop, mesh)
     tkey = twin_key(tw, mesh.resolution)
     start = time.perf_counter()
     if cfg.mode == "real":

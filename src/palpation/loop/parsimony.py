@@ -10,10 +10,10 @@ every added effect (with the effects that act through it: friction goes with con
    ones where the set has none) are then not significantly worse than the final twin's, the effect was not
    needed and goes.
 Before both, an added effect held less than loop.method.min_strength_steps nominal steps from off (effects.strength;
-surface contact aside, see CARRIERS) goes without a test: a significance test at a noise floor this low would keep a term of hundredths of a millimetre
-that only evens out what the rest's fit left (its uncertainty is smaller still). The least needed effect goes first
-and the rest are tested again; an effect that goes leaves the named set, the
-searched parameters and the twin file (its parameters back at their off values). Effects the starting twin had
+surface contact aside, see CARRIERS) goes without a test: a significance test at a noise floor this low would keep
+a term of hundredths of a millimetre that only evens out what the rest's fit left (its uncertainty is smaller
+still). The least needed effect goes first and the rest are tested again; an effect that goes leaves the named set,
+the searched parameters and the twin file (its parameters back at their off values). Effects the starting twin had
 are not judged. Each problem's record lands in p.parsimony. Which sets get step 2 is loop.method.prune's choice
 (loop.unexplained.check_all): none ("inert": step 1 only), the sets still above the noise, or all.
 """
