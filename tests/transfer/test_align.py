@@ -93,6 +93,42 @@ def test_alignment_option_changes_the_test_scores_only_and_is_recorded(train_set
         run(compose_train([*base, "experiment=C-to-B", "recipe.align=meanstd"]), tmp_path / "cb")
 
 
+def test_also_aligned_scores_the_same_models_as_their_own_aligned_training(train_sets, tmp_path):
+    """One training of seeds [0, 1], scored on Silicone and (A-to-C) on Meat, plain and under two alignments:
+    every aligned run is byte for byte the run its own training with that recipe gives, and all share one history."""
+    from palpation.apps.train import run
+
+    paths = [f"data.{k}={v}" for k, v in train_sets.items()]
+    base = ["experiment=A-to-B", "model=compact", "seeds=[0,1]", "clip_len=3", "track=false", "also_test=[A-to-C:meat]",
+            *TINY, *paths]
+    root = tmp_path / "shared"
+    entries = [f"coral:other_real:{tmp_path / 'coral'}", f"meanstd:test_set:{tmp_path / 'seqless'}"]
+    out = run(compose_train([*base, f"also_aligned=[{','.join(entries)}]"]), root / "A-to-B" / "L3")
+    assert len(out) == 2 * 2 * 3  # seeds x test sets x (plain, two alignments)
+    alone = tmp_path / "alone"
+    run(compose_train([*base, "recipe.align=coral", "recipe.align_stats=other_real"]), alone / "A-to-B" / "L3")
+    for config in ("A-to-B", "A-to-C"):
+        for seed in (0, 1):
+            runs = {k: tmp_path / k / config / "L3" / f"seed{seed}" for k in ("shared", "coral", "seqless", "alone")}
+            m = {k: json.loads((d / "metrics.json").read_text()) for k, d in runs.items()}
+            assert m["shared"]["history"] == m["coral"]["history"] == m["seqless"]["history"] == m["alone"]["history"]
+            assert "alignment" not in m["shared"] and m["seqless"]["alignment"]["transductive"] is True
+            assert m["coral"]["alignment"] == m["alone"]["alignment"]
+            same = np.load(runs["coral"] / "scores.npz")["probs"], np.load(runs["alone"] / "scores.npz")["probs"]
+            assert np.array_equal(*same)
+            plain = np.load(runs["shared"] / "scores.npz")["probs"]
+            assert not np.allclose(plain, same[0]) and not np.allclose(plain, np.load(runs["seqless"] / "scores.npz")["probs"])
+    bad = [("also_aligned=[coral:other_real]", "write '<align>:<align_stats>:<folder>'"),
+           (f"also_aligned=[none:test_set:{tmp_path}]", "write '<align>:<align_stats>:<folder>'"),
+           (f"also_aligned=[coral:a:{tmp_path}]", "write '<align>:<align_stats>:<folder>'"),
+           (f"also_aligned=[coral:test_set:{tmp_path / 'x'},meanstd:test_set:{tmp_path / 'x'}]", "distinct folders")]
+    for override, message in bad:
+        with pytest.raises(ValueError, match=message):
+            run(compose_train([*base, override]), tmp_path / "bad" / "A-to-B" / "L3")
+    with pytest.raises(ValueError, match="also_aligned uses the models of `seeds`"):
+        run(compose_train(["experiment=A-to-B", f"also_aligned=[coral:test_set:{tmp_path}]", "track=false"]), tmp_path)
+
+
 def test_select_on_other_real_chooses_on_the_other_set_and_never_on_the_scored_one(train_sets, tmp_path):
     from palpation.apps.train import run
 

@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from palpation.apps.train import job_from_config
+from palpation.apps.train import also_aligned, job_from_config
 from palpation.paths import REPO_ROOT
 from palpation.transfer.report import read_methods
 
@@ -41,11 +41,15 @@ def test_every_command_composes_and_covers_every_method_and_configuration():
         method = next(a for a in argv if a.startswith("hydra.run.dir=")).split("/")[-3]
         assert argv[-1].endswith(f"{method}/{job.config_name}/L5")
         assert job.train.select_metric == "ap"  # the selection rules compare checkpoint-split AP
-        scored |= {(method, job.config_name)} | {(method, a.split(":")[0]) for a in cfg.also_test}
+        configs = {job.config_name} | {a.split(":")[0] for a in cfg.also_test}
+        aligned = [folder.name for *_, folder in also_aligned(cfg)]  # valid entries: the app's own check
+        scored |= {(m, c) for m in [method, *aligned] for c in configs}
         if job.train.pseudo != "none" or job.train.select_on == "other_real":
             assert not cfg.also_test  # trained apart
     want = {(m, c) for m, spec in methods.items() for c in spec.get("configs", ("A-to-B", "A-to-C", "C-to-B"))}
     assert scored == want and len(lines) == len(set(lines))
+    assert not [ln for ln in lines for m, spec in methods.items() if "scored_with" in spec and f"/{m}/" in
+                ln.split("hydra.run.dir=")[1]]  # a method scored with another's models trains nothing itself
     students = _lines("--stage", "students")
     assert students and all("recipe.pseudo_from=" in s for s in students)
     assert not [t for t in _lines("--stage", "teachers") if "recipe.pseudo_from=" in t]
@@ -70,6 +74,11 @@ def test_tiny_cpu_run_end_to_end(train_sets, tmp_path):
     about: teacher
     transductive: false
     overrides: [recipe=robust]
+  robust_seqnorm:
+    about: robust's models, each scored sequence normalised on its own clips
+    transductive: true
+    scored_with: robust
+    overrides: [recipe=robust, recipe.align=meanstd, recipe.align_stats=test_sequence]
   student:
     about: transductive student, 2 of 3 seeds agreeing
     transductive: true
@@ -89,10 +98,32 @@ def test_tiny_cpu_run_end_to_end(train_sets, tmp_path):
     assert "teachers: 2 trainings" in log and "students: 3 trainings" in log
     rows = list(csv.DictReader(open(out / "transfer.csv")))
     assert {(r["config"], r["method"]) for r in rows} >= {(c, m) for c in ("A-to-B", "A-to-C", "C-to-B")
-                                                          for m in ("robust", "student")}
-    assert {r["transductive"] for r in rows if r["method"] == "student"} == {"true"}
+                                                          for m in ("robust", "robust_seqnorm", "student")}
+    assert {r["transductive"] for r in rows if r["method"] in ("student", "robust_seqnorm")} == {"true"}
     assert (out / "transfer_runs.tgz").is_file()
     again = subprocess.run(["bash", str(SCRIPTS / "gpu_transfer.sh"), str(out)], capture_output=True, text=True,
                            cwd=REPO_ROOT, env=env, timeout=300)
     assert again.returncode == 0 and "teachers: 0 trainings" in (out / "transfer.log").read_text()
-    assert transfer_commands.finished(str(runs), "student", ["C-to-B"], [0, 1, 2], 3)
+    assert transfer_commands.finished(str(runs), read_methods(methods), "student", ["C-to-B"], [0, 1, 2], 3)
+
+
+def test_a_method_scored_with_another_must_differ_from_it_in_the_alignment_only(tmp_path):
+    base = """methods:
+  robust: {about: a, transductive: false, overrides: [recipe=robust]}
+  student: {about: b, transductive: false, overrides: [recipe=robust, recipe.select_on=other_real]}
+"""
+    good = "  aligned: {about: c, transductive: true, scored_with: robust, overrides: [recipe=robust, " \
+           "recipe.align=coral, recipe.align_stats=test_set]}\n"
+    path = tmp_path / "methods.yaml"
+    path.write_text(base + good)
+    methods = read_methods(path)
+    assert transfer_commands.scored_with(methods, "robust", ["C-to-B"]) == ["aligned"]
+    assert not [t for t in transfer_commands.trainings(methods) if t[0] == "aligned"]
+    for bad, why in [("scored_with: student, overrides: [recipe=robust, recipe.align=coral]", "must be student's"),
+                     ("scored_with: robust, overrides: [recipe=robust]", "must set recipe.align"),
+                     ("scored_with: nobody, overrides: [recipe=robust, recipe.align=coral]", "name a method"),
+                     ("scored_with: robust, overrides: [recipe=robust, recipe.lr=0.1, recipe.align=coral]",
+                      "must be robust's")]:
+        path.write_text(base + "  aligned: {about: c, transductive: true, " + bad + "}\n")
+        with pytest.raises(ValueError, match=why):
+            read_methods(path)

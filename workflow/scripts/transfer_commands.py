@@ -5,7 +5,8 @@
 Per method of --methods and configuration it runs on: A-to-B scored on Silicone and, by the same models, on Meat
 as A-to-C (also_test), and C-to-B; a method that chooses its checkpoint on the other real set or self-trains
 (recipe.select_on=other_real, recipe.pseudo) trains each configuration apart. All seeds train together in one
-process. Stage `teachers`: the methods without recipe.pseudo_from; `students`: those with it (their teachers'
+process. A method `scored_with` another (an alignment of the scored clips only) has no training of its own: the
+other's training scores it too (also_aligned), so both hold the same models. Stage `teachers`: the methods without recipe.pseudo_from; `students`: those with it (their teachers'
 scores must exist first). --pending leaves out a training whose every output folder holds every seed's
 metrics.json (a cut training is listed again, whole).
 """
@@ -19,7 +20,7 @@ from pathlib import Path
 
 from palpation.readers import one_line
 from palpation.report.runs import run_dir
-from palpation.transfer.report import CONFIGS, covers, read_methods
+from palpation.transfer.report import CONFIGS, alignment_of, covers, read_methods
 
 TEST_SETS = {"A-to-B": "silicone", "A-to-C": "meat", "C-to-B": "silicone"}
 
@@ -36,9 +37,12 @@ def stage(overrides: list[str]) -> str:
 
 
 def trainings(methods: dict) -> list[tuple[str, str, list[str]]]:
-    """(method, configuration, the configurations it scores) of every training, teachers first."""
+    """(method, configuration, the configurations it scores) of every training, teachers first. A method scored
+    with another's models (scored_with) has no training of its own: see scored_with()."""
     out = []
     for name, spec in methods.items():
+        if "scored_with" in spec:
+            continue
         configs = [c for c in CONFIGS if covers(spec, c)]
         if not trained_apart(spec["overrides"]) and {"A-to-B", "A-to-C"} <= set(configs):
             out.append((name, "A-to-B", ["A-to-B", "A-to-C"]))
@@ -47,16 +51,27 @@ def trainings(methods: dict) -> list[tuple[str, str, list[str]]]:
     return sorted(out, key=lambda t: stage(methods[t[0]]["overrides"]) == "students")
 
 
-def command(root: str, method: str, spec: dict, config: str, scored: list[str], seeds: list[int], device: str,
+def scored_with(methods: dict, method: str, scored: list[str]) -> list[str]:
+    """The methods scored by `method`'s training of the configurations `scored` (their scored_with), in file order."""
+    return [m for m, spec in methods.items()
+            if spec.get("scored_with") == method and any(covers(spec, c) for c in scored)]
+
+
+def command(root: str, methods: dict, method: str, config: str, scored: list[str], seeds: list[int], device: str,
             clip_len: int, python: str, extra: list[str]) -> list[str]:
     also = [f"also_test=[{c}:{TEST_SETS[c]}]" for c in scored if c != config]
-    return [python, "-m", "palpation.apps.train", f"experiment={config}", *spec["overrides"], f"device={device}",
-            f"seeds=[{','.join(map(str, seeds))}]", *also, f"clip_len={clip_len}", "track=false", "progress=false",
-            f"hydra.run.dir={Path(root) / method / config / f'L{clip_len}'}", *extra]
+    aligned = [":".join([*alignment_of(methods[m]["overrides"]), str(Path(root) / m)])
+               for m in scored_with(methods, method, scored)]
+    also += [f"also_aligned=[{','.join(aligned)}]"] if aligned else []
+    return [python, "-m", "palpation.apps.train", f"experiment={config}", *methods[method]["overrides"],
+            f"device={device}", f"seeds=[{','.join(map(str, seeds))}]", *also, f"clip_len={clip_len}", "track=false",
+            "progress=false", f"hydra.run.dir={Path(root) / method / config / f'L{clip_len}'}", *extra]
 
 
-def finished(root: str, method: str, scored: list[str], seeds: list[int], clip_len: int) -> bool:
-    return all((run_dir(Path(root) / method, c, clip_len, s) / "metrics.json").is_file() for c in scored for s in seeds)
+def finished(root: str, methods: dict, method: str, scored: list[str], seeds: list[int], clip_len: int) -> bool:
+    """Every run of the training exists: the method's own and those of the methods it scores too."""
+    return all((run_dir(Path(root) / m, c, clip_len, s) / "metrics.json").is_file()
+               for m in [method, *scored_with(methods, method, scored)] for c in scored for s in seeds)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -82,9 +97,9 @@ def main(argv: list[str] | None = None) -> int:
     for method, config, scored in trainings(methods):
         if a.stage != "all" and stage(methods[method]["overrides"]) != a.stage:
             continue
-        if a.pending and finished(a.runs_root, method, scored, a.seeds, a.clip_len):
+        if a.pending and finished(a.runs_root, methods, method, scored, a.seeds, a.clip_len):
             continue
-        cmd = shlex.join(command(a.runs_root, method, methods[method], config, scored, a.seeds, a.device,
+        cmd = shlex.join(command(a.runs_root, methods, method, config, scored, a.seeds, a.device,
                                  a.clip_len, a.python, shlex.split(a.extra)))
         print(cmd + (f" > {shlex.quote(str(Path(a.logs) / f'{method}_{config}.log'))} 2>&1" if a.logs else ""))
     return 0

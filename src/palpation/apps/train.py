@@ -8,6 +8,7 @@
     python -m palpation.apps.train experiment=A-to-A seed=0 'also_test=[A-to-B:silicone]' \
         hydra.run.dir=results/adhoc/train/A-to-A/L5/seed0  # the same with one seed (no stacking)
     ... recipe=robust also_uncalibrated=results/adhoc/uncalibrated   # and its raw scores written there too
+    ... recipe=robust 'also_aligned=[coral:test_set:results/adhoc/coral]'   # and scored CORAL-aligned there
 Outputs land in Hydra's run dir (metrics.json, scores.npz, pr.npz, checkpoint.pt) and in MLflow; with
 `seeds`, seed s writes them to <run dir>/seed<s>/ (one MLflow run per seed all the same).
 """
@@ -23,6 +24,7 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
 from palpation.config_check import app_main
+from palpation.graph.align import METHODS as ALIGN_METHODS, STATS_FROM as ALIGN_STATS
 from palpation.model.gpu_slots import shared_cuda
 from palpation.model.job import TrainJob, job_from_settings, run_job, run_jobs_together
 
@@ -64,6 +66,26 @@ def also_tested(cfg: DictConfig, job, out_dir) -> list[tuple[str, str, Path]]:
     return [(name, test_on, out_dir.parents[1] / name / out_dir.name / seed_dir) for name, _, test_on in pairs]
 
 
+def also_aligned(cfg: DictConfig) -> list[tuple[str, str, Path]]:
+    """(align, align_stats, folder) of every `also_aligned` entry "<align>:<align_stats>:<folder>"; each differs
+    from the recipe's own alignment and the folders are distinct."""
+    out = []
+    for entry in cfg.also_aligned:
+        align, _, rest = str(entry).partition(":")
+        stats, _, folder = rest.partition(":")
+        if align not in ALIGN_METHODS[1:] or stats not in ALIGN_STATS or not folder:
+            raise ValueError(f"also_aligned entry {entry!r}: write '<align>:<align_stats>:<folder>' with align in "
+                             f"{list(ALIGN_METHODS[1:])} and align_stats in {list(ALIGN_STATS)}")
+        out.append((align, stats, Path(folder)))
+    if out and cfg.also_uncalibrated:
+        raise ValueError("also_aligned and also_uncalibrated write one folder per run each: use one of them")
+    own = (str(cfg.recipe.align), str(cfg.recipe.align_stats))
+    if any((a, s) == own for a, s, _ in out) or len({f for *_, f in out}) != len(out):
+        raise ValueError(f"also_aligned={list(cfg.also_aligned)}: list distinct folders, each with an alignment other "
+                         f"than the recipe's own ({own[0]}:{own[1]})")
+    return out
+
+
 def run(cfg: DictConfig, out_dir: str | Path | None = None) -> dict | list[dict]:
     """The job body; `out_dir` defaults to Hydra's output dir. With `seeds`, one metrics dict per seed."""
     if out_dir is None:
@@ -91,10 +113,16 @@ def run(cfg: DictConfig, out_dir: str | Path | None = None) -> dict | list[dict]
             dirs += [root / j.config_name / f"L{j.clip_len}" / f"seed{j.seed}" for j in jobs]
             per_job += [{**p, "recipe": {**p["recipe"], "calibration": "none"}} for p in per_job]
             jobs += [replace(j, train=replace(j.train, calibration="none")) for j in jobs]
+        base = list(zip(jobs, per_job))
+        for align, stats, root in also_aligned(cfg):  # the same models, the scored clips aligned (docs/transfer.md)
+            dirs += [root / j.config_name / f"L{j.clip_len}" / f"seed{j.seed}" for j, _ in base]
+            per_job += [{**p, "recipe": {**p["recipe"], "align": align, "align_stats": stats}} for _, p in base]
+            jobs += [replace(j, train=replace(j.train, align=align, align_stats=stats)) for j, _ in base]
         return run_jobs_together(jobs, dirs, params=per_job, track=bool(cfg.track), tags=tags,
                                  progress=bool(cfg.progress))
-    if cfg.also_uncalibrated:
-        raise ValueError("also_uncalibrated uses the models of `seeds` trained together: pass seeds=[...]")
+    for key in ("also_uncalibrated", "also_aligned"):
+        if cfg[key]:
+            raise ValueError(f"{key} uses the models of `seeds` trained together: pass seeds=[...]")
     also = [(replace(job, config_name=name, test_on=test_on), d, {**params, "config_name": name, "test_on": test_on})
             for name, test_on, d in also_tested(cfg, job, out_dir)]
     return run_job(job, out_dir, params=params, track=bool(cfg.track), tags=tags,

@@ -199,6 +199,8 @@ class TrainAppConfig:
     seeds: Optional[List[int]] = ranged(MISSING, ListOf(SEED, unique=True, null=True))  # null: train `seed` alone
     also_test: List[str] = ranged(MISSING, ListOf(Text(), 0, unique=True))  # with seeds: "<config name>:<test set>"
     also_uncalibrated: Optional[str] = MISSING  # with seeds: where the raw-score twins of the runs go
+    # with seeds: "<align>:<align_stats>:<folder>", the same models' scores aligned that way, written there
+    also_aligned: List[str] = ranged(MISSING, ListOf(Text(), 0, unique=True))
     clip_len: int = ranged(MISSING, Int(ge=1))
     device: str = MISSING
     train_on: str = ranged(MISSING, Choice(*DATASETS))

@@ -109,10 +109,17 @@ def load_test_set(job: TrainJob, rest: np.ndarray) -> ClipSet:
 
 
 def training_key(job: TrainJob) -> TrainJob:
-    """What fixes a job's training: everything but its seed, the test set it is scored on and the post-hoc
-    calibration of its scores (fitted after training, on the val split)."""
+    """What fixes a job's training: everything but its seed, the test set it is scored on, the post-hoc
+    calibration of its scores (fitted after training, on the val split) and the alignment of the scored clips
+    (applied at scoring only: docs/transfer.md)."""
     return replace(job, seed=0, config_name="", test_on=job.train_on, data={job.train_on: job.data[job.train_on]},
-                   train=replace(job.train, calibration="none"))
+                   train=replace(job.train, calibration="none", align="none", align_stats="other_real"))
+
+
+def scoring_key(job: TrainJob) -> tuple[str, str, str, str]:
+    """What fixes a job's test scores once its models are trained, calibration aside: (config, test set, align,
+    align_stats); jobs trained together are scored once per key."""
+    return job.config_name, job.test_on, job.train.align, job.train.align_stats
 
 
 def _run_tags(job: TrainJob, tags: dict | None) -> dict:
@@ -177,25 +184,27 @@ def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: 
     """`run_job` for seeds of one configuration (jobs differing only in seed) trained together
     (palpation.model.stacked); one MLflow run and one output folder per job, as separate jobs.
 
-    Jobs may also differ in the test set they are scored on (`config_name`, `test_on`) and in the post-hoc
-    calibration of the scores (`train.calibration`): configurations that train alike (A-to-B and A-to-C both
-    train the large model on Sim) then share one training, each seed's models scored on every test set and
-    written once per calibration; every seed must come with every (test set, calibration).
+    Jobs may also differ in the test set they are scored on (`config_name`, `test_on`), in the post-hoc
+    calibration of the scores (`train.calibration`) and in the alignment of the scored clips (`train.align`,
+    `train.align_stats`): configurations that train alike (A-to-B and A-to-C both train the large model on Sim)
+    then share one training, each seed's models scored on every test set under every alignment and written once
+    per calibration; every seed must come with every (test set, alignment, calibration).
 
     Each test set is scored by all seeds at once (`predict_seeds`). metrics.json gains `trained_together`
     (the seeds and the joint training wall seconds; with several test sets also their `configs`);
     `train_seconds` and `test_seconds` are each job's share of the joint times."""
     first = jobs[0]
     if any(training_key(j) != training_key(first) for j in jobs):
-        raise ValueError("jobs trained together must differ only in their seed, test set and calibration "
+        raise ValueError("jobs trained together must differ only in their seed, test set, alignment and calibration "
                          f"({first.config_name}, L={first.clip_len}); train other configurations apart")
     seeds = list(dict.fromkeys(j.seed for j in jobs))
     tests = list(dict.fromkeys((j.config_name, j.test_on) for j in jobs))
-    outputs = list(dict.fromkeys((j.config_name, j.test_on, j.train.calibration) for j in jobs))
-    keys = [(j.config_name, j.test_on, j.train.calibration, j.seed) for j in jobs]
+    scorings = list(dict.fromkeys(scoring_key(j) for j in jobs))
+    outputs = list(dict.fromkeys((*scoring_key(j), j.train.calibration) for j in jobs))
+    keys = [(*scoring_key(j), j.train.calibration, j.seed) for j in jobs]
     if len(set(keys)) != len(jobs) or len(jobs) != len(seeds) * len(outputs):
-        raise ValueError(f"jobs trained together need every seed {seeds} once with every (test set, calibration) "
-                         f"{outputs}")
+        raise ValueError(f"jobs trained together need every seed {seeds} once with every (test set, alignment, "
+                         f"calibration) {outputs}")
     if len(tests) > 1 and first.train.pseudo != "none":
         raise ValueError(PSEUDO_APART.format(first.config_name))
     partner = {j.config_name: cross_real_partner(j, tests) for j in jobs if j.train.calibration == "cross_real"}
@@ -209,19 +218,21 @@ def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: 
     if len(tests) > 1:
         together["configs"] = [name for name, _ in tests]
     scored, test_sets, aligned = {}, {}, {}
-    source = clip_moments(d.train, d.rest, d.topo, first.train.remove_common_motion) if first.train.align != "none" \
-        else None
-    for name, test_on in tests:  # each test set scored by all seeds at once; each job's share of the time
-        job = next(j for j in jobs if (j.config_name, j.test_on) == (name, test_on))
-        test_sets[name] = d.test if job.test_on == first.test_on and job.data == first.data \
-            else load_test_set(job, d.rest)
+    source = clip_moments(d.train, d.rest, d.topo, first.train.remove_common_motion) \
+        if any(j.train.align != "none" for j in jobs) else None
+    for key in scorings:  # each test set scored by all seeds at once, per alignment; each job's share of the time
+        job = next(j for j in jobs if scoring_key(j) == key)
+        name = job.config_name
+        if name not in test_sets:
+            test_sets[name] = d.test if job.test_on == first.test_on and job.data == first.data \
+                else load_test_set(job, d.rest)
         t0 = time.perf_counter()
         align = alignment(job, d.train, test_sets[name], d.rest, d.topo, source)
-        aligned[name] = {"alignment": align.to_dict()} if align else {}
+        aligned[key] = {"alignment": align.to_dict()} if align else {}
         per_seed = predict_seeds([r.model for r in results], [r.stats for r in results], test_sets[name], d.rest,
                                  d.topo, first.train.batch_size, first.train.device, progress, align)
         share = (time.perf_counter() - t0) / len(seeds)
-        scored.update({(name, s): (*p, share) for s, p in zip(seeds, per_seed)})
+        scored.update({(key, s): (*p, share) for s, p in zip(seeds, per_seed)})
     out = []
     for i, (job, out_dir) in enumerate(zip(jobs, out_dirs)):
         result = replace(by_seed[job.seed], train_seconds=joint / len(jobs))
@@ -232,13 +243,13 @@ def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: 
         with ctx:
             if track:
                 tracking.log_metric_history(result.steps)
-            fit_on = None
-            if job.config_name in partner:  # the same seed's models' raw scores on the other real set
-                fit_on = (*scored[(partner[job.config_name], job.seed)][:2], partner[job.config_name])
+            fit_on, key = None, scoring_key(job)
+            if job.config_name in partner:  # the same seed's models' raw scores on the other real set, aligned alike
+                other = next(k for k in scorings if k[0] == partner[job.config_name] and k[2:] == key[2:])
+                fit_on = (*scored[(other, job.seed)][:2], partner[job.config_name])
             out.append(finish_job(job, result, replace(d, test=test_sets[job.config_name]), out_dir, track,
-                                  progress, {**restarts[job.seed], "trained_together": together, **aligned[job.config_name]},
-                                  scored[(job.config_name, job.seed)],
-                                  fit_on))
+                                  progress, {**restarts[job.seed], "trained_together": together, **aligned[key]},
+                                  scored[(key, job.seed)], fit_on))
     return out
 
 

@@ -25,13 +25,18 @@ COLUMNS = ("config", "method", "selection", "transductive", "chosen", "seeds", "
            "pos_share_05")
 CONFIGS = ("A-to-B", "A-to-C", "C-to-B")  # the transfer configurations (conf/experiment/)
 METHOD_KEYS = {"about": Text(), "transductive": Choice(True, False), "overrides": ListOf(Text(), 0)}
-OPTIONAL_KEYS = {"configs": ListOf(Choice(*CONFIGS), 1, unique=True)}  # default: every configuration
+OPTIONAL_KEYS = {"configs": ListOf(Choice(*CONFIGS), 1, unique=True),  # default: every configuration
+                 "scored_with": Text()}  # another method whose models it scores, its own alignment aside
+ALIGN_KEYS = ("recipe.align=", "recipe.align_stats=")  # overrides applied at scoring only (docs/transfer.md)
 
 
 def read_methods(path: str | Path) -> dict[str, dict]:
-    """conf/transfer/methods.yaml: `methods: {name: {about, transductive, overrides[, configs]}}`; unknown keys
-    refused. `configs`: the configurations the method runs on (a self-trained student has no inductive C-to-B)."""
-    fix = f"edit {path} (docs/transfer.md: a method is about, transductive, overrides and optionally configs)"
+    """conf/transfer/methods.yaml: `methods: {name: {about, transductive, overrides[, configs, scored_with]}}`;
+    unknown keys refused. `configs`: the configurations the method runs on (a self-trained student has no inductive
+    C-to-B). `scored_with`: a method (without scored_with) whose overrides are this one's but for the alignment
+    (ALIGN_KEYS): its trainings score this method too (train app `also_aligned`), so the two share their models."""
+    fix = (f"edit {path} (docs/transfer.md: a method is about, transductive, overrides and optionally configs and "
+           "scored_with)")
     data = read_yaml(path, fix, "transfer methods")
     methods = data.get("methods") if set(data) == {"methods"} else None
     if not isinstance(methods, dict) or not methods:
@@ -43,7 +48,35 @@ def read_methods(path: str | Path) -> dict[str, dict]:
         for key, rule in {**METHOD_KEYS, **OPTIONAL_KEYS}.items():
             if key in spec and rule.problem(spec[key]):
                 raise ValueError(f"{path}: methods.{name}.{key}={spec[key]!r}: need {rule.describe()}; {fix}")
+    for name, spec in methods.items():
+        if "scored_with" in spec and scoring_problem(methods, name):
+            raise ValueError(f"{path}: methods.{name}.scored_with={spec['scored_with']!r}: "
+                             f"{scoring_problem(methods, name)}; {fix}")
     return methods
+
+
+def without_alignment(overrides: list[str]) -> list[str]:
+    return [o for o in overrides if not o.startswith(ALIGN_KEYS)]
+
+
+def alignment_of(overrides: list[str]) -> tuple[str, str]:
+    """(align, align_stats) a method's overrides set (the recipe's defaults where unset)."""
+    got = dict(o.split("=", 1) for o in overrides if o.startswith(ALIGN_KEYS))
+    return got.get("recipe.align", "none"), got.get("recipe.align_stats", "other_real")
+
+
+def scoring_problem(methods: dict, name: str) -> str | None:
+    """Why `name` cannot be scored with its `scored_with` method's models, or None."""
+    base = methods[name]["scored_with"]
+    if base not in methods or "scored_with" in methods[base]:
+        return "name a method of this file that has no scored_with itself"
+    if without_alignment(methods[name]["overrides"]) != without_alignment(methods[base]["overrides"]):
+        return f"its overrides must be {base}'s but for {' / '.join(k[:-1] for k in ALIGN_KEYS)}"
+    if alignment_of(methods[name]["overrides"])[0] == "none":
+        return "it must set recipe.align (otherwise it is the same method)"
+    if any(not covers(methods[base], c) for c in CONFIGS if covers(methods[name], c)):
+        return f"it may run only on configurations {base} runs on"
+    return None
 
 
 def is_transductive(method: str, spec: dict, runs: list[Run]) -> bool:
