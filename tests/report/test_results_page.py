@@ -170,7 +170,7 @@ def test_explanation_conditions_and_bad_file(tmp_path):
         load_explanations(bad)
     assert set(load_explanations(EXPLANATIONS)) <= {"run", "data", "calibration", "loop", "seed_sweep", "table3",
                                                     "table4_markers", "table4_maps", "twin_ablation", "recipe_ablation",
-                                                    "recipe_crossfit", "twin_selection"}
+                                                    "recipe_crossfit", "twin_selection", "transfer"}
 
 
 def test_write_is_atomic(tmp_path, monkeypatch):
@@ -328,3 +328,30 @@ def test_timing_record_of_the_same_commit_by_short_hash_is_not_stale(tmp_path):
     assert not timing(tmp_path, {**rec, "commit": full}, full)["stale"]
     assert timing(tmp_path, {**rec, "commit": "9665dd9"}, full)["stale"]
     assert timing(tmp_path, {**rec, "commit": ""}, full)["stale"]  # no commit recorded: cannot be the page's
+
+
+def test_transfer_section_checks_the_aims_on_the_cross_real_inductive_choice(tmp_path):
+    root = fake_results(tmp_path / "results")
+    assert "`transfer/transfer.csv` is missing" in page(root)
+    row = dict(seeds=5, auroc_mean=0.75, pos_share_05=0.1)
+    csv(root, "transfer/transfer.csv", [
+        dict(config="A-to-B", method="m_real", selection="cross_real", transductive="false", chosen="true",
+             ap_mean=0.31, ap_std=0.03, **row),
+        dict(config="A-to-B", method="m_best", selection="cross_real", transductive="false", chosen="false",
+             ap_mean=0.45, ap_std=0.01, **row),  # the best test score, not chosen: the aim ignores it
+        dict(config="A-to-B", method="m_tr", selection="cross_real", transductive="true", chosen="true",
+             ap_mean=0.50, ap_std=0.01, **row),  # transductive: reported apart, never toward the aim
+        dict(config="A-to-C", method="m_real", selection="cross_real", transductive="false", chosen="true",
+             ap_mean=0.33, ap_std=0.01, **row)])
+    (root / "data" / "meat").mkdir(parents=True)
+    (root / "data" / "meat" / "meat.json").write_text(json.dumps({"nodes": 1000, "ref_hard_positives": 250,
+                                                                  "ref_hard_accuracy": 0.78}))
+    text = page(root)
+    sec = text.split("## Transfer beyond the paper")[1].split("\n## ")[0]
+    assert "25.0 % of markers positive, accuracy 0.780" in sec
+    assert f"| 0.3100 ± 0.0300 | 0.7500 | {paper.SEED_SWEEP['A-to-B']['ap'][0]:.4f} /" in sec
+    diff = text.split("### Transfer beyond the paper")[1].split("\n### ")[0]
+    assert "A-to-B m_real (cross_real, inductive): AP 0.31 (aim >= 0.4): **missed by 0.09**" in diff
+    assert "A-to-B m_real (cross_real, inductive): AP std 0.03 (aim <= 0.02): **missed by 0.01**" in diff
+    assert "A-to-C m_real (cross_real, inductive): AP 0.33 (aim >= 0.3): met." in diff
+    assert "m_best" not in diff and "m_tr" not in diff

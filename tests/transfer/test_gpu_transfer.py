@@ -127,3 +127,17 @@ def test_a_method_scored_with_another_must_differ_from_it_in_the_alignment_only(
         path.write_text(base + "  aligned: {about: c, transductive: true, " + bad + "}\n")
         with pytest.raises(ValueError, match=why):
             read_methods(path)
+
+
+def test_the_committed_table_is_the_paper_record_and_has_the_issue_shape():
+    """docs/results/transfer.csv is a copy of the paper record the results page reads; five seeds per row, the three
+    configurations, one chosen row per (config, selection, transductive)."""
+    ours = REPO_ROOT / "docs" / "results" / "transfer.csv"
+    assert ours.read_bytes() == (REPO_ROOT / "docs" / "results" / "paper" / "transfer" / "transfer.csv").read_bytes()
+    rows = list(csv.DictReader(open(ours)))
+    assert list(rows[0]) == ["config", "method", "selection", "transductive", "chosen", "seeds", "ap_mean", "ap_std",
+                             "auroc_mean", "pos_share_05"]
+    assert {r["config"] for r in rows} == {"A-to-B", "A-to-C", "C-to-B"} and {r["seeds"] for r in rows} == {"5"}
+    groups = {(r["config"], r["selection"], r["transductive"]) for r in rows}
+    for g in groups:
+        assert sum(r["chosen"] == "true" for r in rows if (r["config"], r["selection"], r["transductive"]) == g) == 1

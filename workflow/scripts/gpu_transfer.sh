@@ -11,7 +11,7 @@
 # written; 75: still running; 1: a training or the table failed (OUTDIR/logs/<method>_<config>.log).
 # JOBS (default 3) trainings run at once on the card, each with CORES/JOBS CPU threads (CORES default: nproc);
 # each trains its seeds together in one process (plus a batch worker per seed). DEVICE (cuda), CLIP_LEN (5), PYTHON
-# (python3) and EXTRA (overrides added to every training, e.g. data.sim=...) as named. OUTDIR gets the logs,
+# (python3) and EXTRA (overrides of every training, e.g. data.sim=...; a method's own win) as named. OUTDIR gets the logs,
 # transfer.csv / transfer.json and transfer_runs.tgz (every finished run's metrics.json, scores.npz, pr.npz).
 set -uo pipefail
 here=$(dirname "${BASH_SOURCE[0]}")

@@ -63,9 +63,10 @@ def command(root: str, methods: dict, method: str, config: str, scored: list[str
     aligned = [":".join([*alignment_of(methods[m]["overrides"]), str(Path(root) / m)])
                for m in scored_with(methods, method, scored)]
     also += [f"also_aligned=[{','.join(aligned)}]"] if aligned else []
-    return [python, "-m", "palpation.apps.train", f"experiment={config}", *methods[method]["overrides"],
+    # `extra` (data paths of the machine) first: a method's own override of the same key wins (robust_spread's Sim set)
+    return [python, "-m", "palpation.apps.train", f"experiment={config}", *extra, *methods[method]["overrides"],
             f"device={device}", f"seeds=[{','.join(map(str, seeds))}]", *also, f"clip_len={clip_len}", "track=false",
-            "progress=false", f"hydra.run.dir={Path(root) / method / config / f'L{clip_len}'}", *extra]
+            "progress=false", f"hydra.run.dir={Path(root) / method / config / f'L{clip_len}'}"]
 
 
 def finished(root: str, methods: dict, method: str, scored: list[str], seeds: list[int], clip_len: int) -> bool:

@@ -60,6 +60,9 @@ SOURCES = {
                              ("twin", "fitted_on", "heldout_slide_mae_px", "vessel_ratio_sim", "vessel_ratio_real",
                               "silicone_ap_crossfit", "silicone_auroc_crossfit", "meat_ap", "meat_auroc",
                               "silicone_pos_share_05", "seeds", "chosen"), "twin_selection"),
+    "transfer": Source("transfer/transfer.csv", ("config", "method", "selection", "transductive", "chosen", "seeds",
+                                                 "ap_mean", "ap_std", "auroc_mean", "pos_share_05"),
+                       "workflow/scripts/gpu_transfer.sh (docs/transfer.md)"),
     "drift_bounds": Source("judge/drift_bounds.csv", ("predictor", "uses_heldout_truth", "heldout_mae_px",
                                                       "change_vs_no_motion"), "twin_selection"),
 }
@@ -76,6 +79,7 @@ TITLES = {
     "recipe_ablation": "Training recipe: reference vs robust (issue 15)",
     "recipe_crossfit": "Training recipe: calibration cross-fitted between the real sets (issue 15)",
     "twin_selection": "Twin on the task (issue 12)",
+    "transfer": "Transfer beyond the paper: selection on the other real set, unlabelled real motion",
 }
 
 

@@ -25,12 +25,13 @@ from palpation.report import page_training as training
 from palpation.report import page_twin as twin
 from palpation.report.compare import SOURCES, TITLES, Section, read_json, read_table
 from palpation.report.page_judge import twin_selection_section
+from palpation.report.page_transfer import transfer_section
 from palpation.report.page_recipe import CROSSFIT_FIGURE, recipe_ablation_section, recipe_crossfit_section
 from palpation.report.markdown import markdown, num
 from palpation.report.reproduction import BENCHMARKS, benchmark_jobs, per_rule, run_start, span_s
 
 ORDER = ("data", "calibration", "loop", "seed_sweep", "table3", "table4_markers", "table4_maps", "twin_ablation",
-         "recipe_ablation", "recipe_crossfit", "twin_selection")
+         "recipe_ablation", "recipe_crossfit", "twin_selection", "transfer")
 FIGURES = (  # (caption, path under the results root; a glob lists every match)
     ("Fig. 4: fitted twin vs the photos", "calibration/fig4.png"),
     ("Fig. 4 at the paper's parameters", "calibration/fig4_paper.png"),
@@ -180,6 +181,8 @@ def sections(root: Path, k: float = 2.0, link=None) -> dict[str, Section | None]
             read_json(root / "recipe" / "report" / "recipe_calibration_crossfit.json"),
             link(CROSSFIT_FIGURE) if link is not None and (root / CROSSFIT_FIGURE).exists() else None),
         "twin_selection": lambda: twin_selection_section(t["twin_selection"], t["loop_slides"], t["drift_bounds"]),
+        "transfer": lambda: transfer_section(t["transfer"], read_json(root / "transfer" / "transfer.json"),
+                                             read_json(root / "data" / "meat" / "meat.json")),
     }
     return {key: build[key]() if t[key] is not None else None for key in ORDER}
 
