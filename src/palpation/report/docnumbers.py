@@ -21,6 +21,7 @@ from palpation.report.loop_numbers import (
 )
 from palpation.report.maps_numbers import SILICONE_MEASURES, silicone_check
 from palpation.report.records import FIX, record_csv as _csv
+from palpation.report.transfer_numbers import transfer_choice
 from palpation.report.twin_numbers import (
     binding_offset, stable_dt, stable_dt_table, uniaxial_table, verification,
 )
@@ -293,6 +294,8 @@ NUMBERS: dict[str, Callable[[Path], str]] = {
     "loop.heldout": lambda r: loop_change(r, "mae_heldout_px", "px", 2),
     "twin_choice": twin_choice,
     "twin_ablation": twin_ablation,
+    "transfer.silicone": lambda r: transfer_choice(r, "A-to-B"),
+    "transfer.meat": lambda r: transfer_choice(r, "A-to-C"),
     "wall.quick": lambda r: last_wall_time(r, "quick"),
     "wall.paper": lambda r: last_wall_time(r, "paper"),
     "twin.streamed": lambda r: twin_batch_time(r, "streamed"),

@@ -1,0 +1,21 @@
+"""The docs' numbers of the transfer table (docs/results/transfer.csv), for report.docnumbers."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from palpation.report.records import record_csv as _csv
+
+
+def transfer_choice(results: Path, config: str, transductive: bool = False) -> str:
+    """The method the cross_real rule chose for `config` (docs/results/transfer.csv), its AP, and the reference's."""
+    table = _csv(results, "transfer.csv", ("config", "method", "selection", "transductive", "chosen", "ap_mean",
+                                           "ap_std")).astype({"chosen": str, "transductive": str})
+    rows = table.query("config == @config and selection == 'cross_real'")
+    pick = rows[(rows["chosen"].str.lower() == "true") & (rows["transductive"].str.lower() == str(transductive).lower())]
+    ref = rows[rows["method"] == "reference"]
+    if len(pick) != 1 or len(ref) != 1:
+        raise ValueError(f"record {results / 'transfer.csv'}: no single cross_real choice and reference row of "
+                         f"{config}; regenerate it (workflow/scripts/transfer_table.py)")
+    p = pick.iloc[0]
+    return f"`{p['method']}` AP {p['ap_mean']:.4f} ± {p['ap_std']:.4f} (reference recipe {ref.iloc[0]['ap_mean']:.4f})"
