@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import importlib.util
 import json
 import os
 import subprocess
@@ -39,8 +40,11 @@ def tracking_uri() -> str:
 
 
 def check_store() -> None:
-    """Fail at app start, not after the work, when the SQLite store cannot be used: not a database,
-    or the file or its folder not writable. Other stores (a server) are left to MLflow."""
+    """Fail at app start, not after the work, when MLflow is not installed or the SQLite store cannot be used: not
+    a database, or the file or its folder not writable. Other stores (a server) are left to MLflow."""
+    if importlib.util.find_spec("mlflow") is None:  # a bare machine (a lent GPU) may lack it: say so before the work
+        raise ValueError("track=true logs to MLflow, which this Python cannot import; install the lock's "
+                                  "mlflow (pip install mlflow==3.17.2) or pass track=false")
     uri = tracking_uri()
     if not uri.startswith("sqlite:///"):
         return

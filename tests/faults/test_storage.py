@@ -111,6 +111,22 @@ def test_app_checks_the_store_before_any_work(tmp_path, monkeypatch, fault):
     assert len(ran) == 1
 
 
+def test_app_without_mlflow_fails_before_any_work(tmp_path, monkeypatch, fault):
+    """a tracked app on a machine whose Python lacks mlflow (a bare GPU host): one line at start, not a traceback
+    after the computation; track=false still runs"""
+    from omegaconf import OmegaConf
+
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path / 'mlflow.db'}")
+    real = tracking.importlib.util.find_spec
+    monkeypatch.setattr(tracking.importlib.util, "find_spec", lambda name, *a: None if name == "mlflow" else real(name, *a))
+    ran = []
+    with fault(SystemExit, "simulate: error: track=true logs to MLflow", "pip install mlflow==3.17.2", "track=false"):
+        app_main("simulate")(ran.append)(OmegaConf.create({"track": True}))
+    assert ran == []
+    app_main("simulate")(ran.append)(OmegaConf.create({"track": False}))
+    assert len(ran) == 1
+
+
 def test_store_check_accepts_a_fresh_and_a_real_store(tmp_path, monkeypatch):
     import sqlite3
 
