@@ -45,13 +45,20 @@ def test_depth_of_a_slide_recovered_from_a_bank_at_known_depths():
         assert abs(est - depth) < 0.15, (depth, est)
     with pytest.raises(ValueError, match="at 2 or more depths"):
         DepthLookup.fit(np.ones((5, 2)), np.full(5, 3.0))
+    # a slide that does not move (a tissue far softer than the bank's surface) lies below the bank: extrapolated
+    still = REST[None].repeat(8, 0)
+    flags = lookup.in_bank(np.array([slide_signature(toy_slide(3.5, rng), REST), slide_signature(still, REST)]))
+    assert flags.tolist() == [True, False] and lookup.bank_mm == (1.0, 6.0)
+    assert lookup.raw(slide_signature(still, REST))[0] < 1.0 - 2 * lookup.loo_rmse_mm
 
 
 def test_sim_depths_drawn_over_the_estimates_leave_the_other_draws_alone(tmp_path):
     path = tmp_path / "latent_depth.csv"
-    save_text(path, csv_text([{"set": "meat", "trial": f"t{i}", "depth_mm": d} for i, d in
-                              enumerate([1.5, 2.5, 4.0])], ("set", "trial", "depth_mm"), 4))
-    est = read_estimates(path)
+    rows = [{"set": "meat", "trial": f"t{i}", "depth_mm": d, "in_bank": "true"} for i, d in enumerate([1.5, 2.5, 4.0])]
+    save_text(path, csv_text([*rows, {"set": "silicone", "trial": "s0", "depth_mm": 0.0, "in_bank": "false"}],
+                             ("set", "trial", "depth_mm", "in_bank"), 4))
+    est = read_estimates(path)  # the extrapolated estimate is left out
+    assert est.tolist() == [1.5, 2.5, 4.0]
     depths = draw_depths(est, 40, seed=42)
     assert set(depths) <= set(est) and len(set(depths)) == 3 and np.array_equal(depths, draw_depths(est, 40, 42))
     cfg = OmegaConf.create({"set": "randomised", "n_pairs": 4, "seed": 42, "dataset": {"depths_from": str(path)}})
@@ -64,8 +71,14 @@ def test_sim_depths_drawn_over_the_estimates_leave_the_other_draws_alone(tmp_pat
     assert set_depths(OmegaConf.create({"set": "randomised", "dataset": {"depths_from": None}})) is None
     bank = trajectory_set("depth_bank", 0, depths_mm=[1.0, 3.0])
     assert [(r.depth_mm, r.vessel, r.kind) for r in bank] == [(1.0, False, "slide"), (3.0, False, "slide")]
-    save_text(path, "set,trial,depth_mm\nmeat,t0,12.0\n")
+    save_text(path, "set,trial,depth_mm,in_bank\nmeat,t0,12.0,true\n")
     with pytest.raises(ValueError, match="depth_mm in"):
+        read_estimates(path)
+    save_text(path, "set,trial,depth_mm,in_bank\nmeat,t0,0.0,false\nmeat,t1,0.0,false\n")
+    with pytest.raises(ValueError, match="every estimate lies outside its bank's depths"):
+        read_estimates(path)
+    save_text(path, "set,trial,depth_mm\nmeat,t0,2.0\n")  # written before the flag: refused, rerun the script
+    with pytest.raises(ValueError, match="in_bank"):
         read_estimates(path)
 
 

@@ -6,7 +6,8 @@
     python workflow/scripts/latent_depth.py --bank results/transfer/bank/manifest.json \
         --out results/transfer/latent_depth.csv
 
-Writes the estimates CSV (set, trial, depth_mm, signature), `<stem>_bank.csv` (the bank's depths and fitted
+Writes the estimates CSV (set, trial, depth_mm, raw_mm unclipped, in_bank: false where the lookup extrapolates,
+signature), `<stem>_bank.csv` (the bank's depths and fitted
 depths) and `<stem>.json` (the lookup's coefficients and leave-one-out error). Labels are not read.
 """
 
@@ -35,16 +36,19 @@ def main(argv: list[str] | None = None) -> int:
         lookup, bank = bank_lookup(a.bank)
         rows = real_estimates(lookup, {"silicone": a.silicone, "meat": a.meat}, rest_layout(a.rest))
         out = Path(a.out)
-        save_text(out, csv_text(rows, ("set", "trial", "depth_mm", *SIGNATURE), 4))
+        save_text(out, csv_text(rows, ("set", "trial", "depth_mm", "raw_mm", "in_bank", *SIGNATURE), 4))
         save_text(out.with_name(out.stem + "_bank.csv"),
                   csv_text(bank, ("trial", "depth_mm", "fitted_mm", *SIGNATURE), 4))
         save_json(out.with_suffix(".json"), {"coef": lookup.coef.tolist(), "signature": list(SIGNATURE),
                                              "loo_rmse_mm": lookup.loo_rmse_mm, "n_bank": lookup.n_bank,
+                                             "bank_mm": list(lookup.bank_mm),
                                              "bank": str(a.bank)})
     except (ValueError, OSError) as exc:
         print(f"latent_depth: {one_line(exc)}", file=sys.stderr)
         return 1
-    print(f"{len(rows)} slides -> {a.out} (bank leave-one-out error {lookup.loo_rmse_mm:.3f} mm)")
+    outside = [f"{r['set']} {r['trial']}" for r in rows if r["in_bank"] == "false"]
+    print(f"{len(rows)} slides -> {a.out} (bank leave-one-out error {lookup.loo_rmse_mm:.3f} mm; "
+          f"{len(outside)} outside the bank's depths{': ' + ', '.join(outside) if outside else ''})")
     return 0
 
 

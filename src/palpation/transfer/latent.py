@@ -11,6 +11,7 @@ on the bank says how well the twin's own depths are recovered. Labels are never 
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +19,7 @@ import numpy as np
 
 from palpation.twin.trajectory import MAX_DEPTH_MM
 
+log = logging.getLogger(__name__)
 SIGNATURE = ("radial_px", "rms_px")
 
 
@@ -43,6 +45,7 @@ class DepthLookup:
     coef: np.ndarray
     loo_rmse_mm: float  # leave-one-out RMS error of the fit on its own bank
     n_bank: int
+    bank_mm: tuple[float, float] = (0.0, MAX_DEPTH_MM)  # the bank's shallowest and deepest slide
 
     @classmethod
     def fit(cls, signatures: np.ndarray, depths_mm: np.ndarray) -> "DepthLookup":
@@ -54,24 +57,46 @@ class DepthLookup:
         coef = np.linalg.lstsq(a, y, rcond=None)[0]
         loo = [y[i] - a[i] @ np.linalg.lstsq(np.delete(a, i, 0), np.delete(y, i), rcond=None)[0]
                for i in range(len(y))]
-        return cls(coef, float(np.sqrt(np.mean(np.square(loo)))), len(y))
+        return cls(coef, float(np.sqrt(np.mean(np.square(loo)))), len(y), (float(y.min()), float(y.max())))
+
+    def raw(self, signatures: np.ndarray) -> np.ndarray:
+        """The fit's depths (mm) of slides' signatures, unclipped."""
+        x = np.atleast_2d(np.asarray(signatures, np.float64))
+        return self.coef[0] + x @ self.coef[1:]
 
     def estimate(self, signatures: np.ndarray) -> np.ndarray:
         """Depths (mm) of slides' signatures, clipped to the twin's range [0, MAX_DEPTH_MM]."""
-        x = np.atleast_2d(np.asarray(signatures, np.float64))
-        return np.clip(self.coef[0] + x @ self.coef[1:], 0.0, MAX_DEPTH_MM)
+        return np.clip(self.raw(signatures), 0.0, MAX_DEPTH_MM)
+
+    def in_bank(self, signatures: np.ndarray) -> np.ndarray:
+        """Whether each fitted depth lies within the bank's depths widened by twice the leave-one-out error: outside
+        it the lookup extrapolates (a slide that moves unlike any bank slide, e.g. another tissue's surface)."""
+        raw, margin = self.raw(signatures), 2.0 * self.loo_rmse_mm
+        return (raw >= self.bank_mm[0] - margin) & (raw <= self.bank_mm[1] + margin)
 
 
 def read_estimates(path: str | Path) -> np.ndarray:
-    """The `depth_mm` column of an estimates CSV (workflow/scripts/latent_depth.py), checked."""
+    """The `depth_mm` of the in-bank rows of an estimates CSV (workflow/scripts/latent_depth.py), checked: an
+    estimate the lookup extrapolated (`in_bank` false) is left out, and a file with none in the bank is refused."""
     from palpation.readers import read_csv
 
-    df = read_csv(path, ("set", "trial", "depth_mm"), "run workflow/scripts/latent_depth.py (docs/transfer.md)",
-                  "depth estimates")
+    fix = "run workflow/scripts/latent_depth.py (docs/transfer.md)"
+    df = read_csv(path, ("set", "trial", "depth_mm", "in_bank"), fix, "depth estimates")
     depths = np.asarray(df["depth_mm"].to_numpy(), np.float64) if df["depth_mm"].dtype.kind in "fiu" else None
     if depths is None or not np.all(np.isfinite(depths)) or np.any((depths < 0) | (depths > MAX_DEPTH_MM)):
         raise ValueError(f"{path}: need finite depth_mm in [0, {MAX_DEPTH_MM}] mm, one row per real slide")
-    return depths
+    flags = df["in_bank"].astype(str).str.lower()
+    if not flags.isin(["true", "false"]).all():
+        raise ValueError(f"{path}: in_bank must be true or false on every row; {fix}")
+    keep = (flags == "true").to_numpy()
+    if not keep.any():
+        raise ValueError(f"{path}: every estimate lies outside its bank's depths (in_bank false): the twin that made "
+                         "the bank moves its markers unlike these slides; make a bank that spans them")
+    if not keep.all():
+        out = sorted(set(df.loc[~keep, "set"]))
+        log.warning("%s: %d of %d estimates lie outside the bank's depths (sets %s) and are left out", path,
+                    int((~keep).sum()), len(keep), out)
+    return depths[keep]
 
 
 def draw_depths(estimates: np.ndarray, n: int, seed: int) -> np.ndarray:
@@ -111,5 +136,6 @@ def real_estimates(lookup: DepthLookup, sets: dict[str, str | Path], rest: np.nd
         for trial, markers in zip(seqs.ids, seqs.markers):
             sig = slide_signature(markers, rest)
             rows.append({"set": name, "trial": trial, "depth_mm": float(lookup.estimate(sig)[0]),
+                         "raw_mm": float(lookup.raw(sig)[0]), "in_bank": str(bool(lookup.in_bank(sig)[0])).lower(),
                          **dict(zip(SIGNATURE, sig.tolist()))})
     return rows
