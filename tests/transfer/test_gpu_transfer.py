@@ -2,6 +2,7 @@
 commands compose for every method, and a CPU tiny run goes teachers -> students -> transfer_table end to end."""
 
 import csv
+import json
 import os
 import shlex
 import subprocess
@@ -41,11 +42,15 @@ def test_every_command_composes_and_covers_every_method_and_configuration():
         method = next(a for a in argv if a.startswith("hydra.run.dir=")).split("/")[-3]
         assert argv[-1].endswith(f"{method}/{job.config_name}/L5")
         assert job.train.select_metric == "ap"  # the selection rules compare checkpoint-split AP
-        configs = {job.config_name} | {a.split(":")[0] for a in cfg.also_test}
+        partners = [a for a in cfg.also_test if ".on_" in a]  # cross_real partners, not configurations
+        configs = {job.config_name} | {a.split(":")[0] for a in cfg.also_test if a not in partners}
         aligned = [folder.name for *_, folder in also_aligned(cfg)]  # valid entries: the app's own check
         scored |= {(m, c) for m in [method, *aligned] for c in configs}
-        if job.train.pseudo != "none" or job.train.select_on == "other_real":
-            assert not cfg.also_test  # trained apart
+        if job.train.pseudo != "none" or job.train.select_on != "val":
+            assert len(configs) == 1  # trained apart
+        if job.train.select_on == "other_real_half" and job.config_name != "C-to-B":
+            other = "meat" if job.test_on == "silicone" else "silicone"
+            assert partners == [f"{job.config_name}.on_{other}:{other}"]  # its cross_real score's source
     want = {(m, c) for m, spec in methods.items() for c in spec.get("configs", ("A-to-B", "A-to-C", "C-to-B"))}
     assert scored == want and len(lines) == len(set(lines))
     assert not [ln for ln in lines for m, spec in methods.items() if "scored_with" in spec and f"/{m}/" in
@@ -82,7 +87,7 @@ def test_tiny_cpu_run_end_to_end(train_sets, tmp_path):
   student:
     about: transductive student, 2 of 3 seeds agreeing
     transductive: true
-    overrides: [recipe=robust, recipe.select_on=other_real, recipe.pseudo=test_set, recipe.pseudo_min_agree=0.6,
+    overrides: [recipe=robust, recipe.select_on=other_real_half, recipe.pseudo=test_set, recipe.pseudo_min_agree=0.6,
                 recipe.pseudo_from={runs / 'robust'}]
 """)
     extra = " ".join(shlex.quote(o) for o in ["graph.rest=ideal", "model=compact", *TINY[1:],
@@ -101,6 +106,14 @@ def test_tiny_cpu_run_end_to_end(train_sets, tmp_path):
                                                           for m in ("robust", "robust_seqnorm", "student")}
     assert {r["transductive"] for r in rows if r["method"] in ("student", "robust_seqnorm")} == {"true"}
     assert (out / "transfer_runs.tgz").is_file()
+    # the student chose on Meat's selection half and scored Meat's method half through its partner run
+    student = json.loads((runs / "student" / "A-to-B" / "L3" / "seed0" / "metrics.json").read_text())
+    partner = json.loads((runs / "student" / "A-to-B.on_meat" / "L3" / "seed0" / "metrics.json").read_text())
+    assert student["selected_on"] == partner["selected_on"] == "meat half" and partner["test_on"] == "meat"
+    assert student["selected_trials"] and student["selected_trials"] == sorted(student["selected_trials"])
+    picked = json.loads((out / "transfer.json").read_text())["rows"]
+    assert {tuple(r["chosen_on"]) for r in picked if r["method"] == "student" and r["config"] == "A-to-B"
+            and r["selection"] == "cross_real"} == {("meat method half (A-to-B.on_meat)",)}
     again = subprocess.run(["bash", str(SCRIPTS / "gpu_transfer.sh"), str(out)], capture_output=True, text=True,
                            cwd=REPO_ROOT, env=env, timeout=300)
     assert again.returncode == 0 and "teachers: 0 trainings" in (out / "transfer.log").read_text()

@@ -2,6 +2,7 @@
 never on the scored set's labels; cross-fitting chooses each fold on the other folds; the CSV's exact columns."""
 
 import csv
+import json
 import subprocess
 import sys
 
@@ -61,7 +62,7 @@ def test_cross_real_choice_is_made_on_the_other_real_set(tmp_path):
     # A-to-B: Meat (the other real set) prefers m2 though m1 scores best on Silicone; the Sim val split picks m1
     assert chosen[("A-to-B", "cross_real", False)] == "m2" and chosen[("A-to-B", "sim_val", False)] == "m1"
     ab = {r["method"]: r for r in _rows(rows, config="A-to-B", selection="cross_real")}
-    assert ab["m1"]["ap_mean"] > ab["m2"]["ap_mean"] and ab["m2"]["chosen_on"] == ["meat all (A-to-C)"]
+    assert ab["m1"]["ap_mean"] > ab["m2"]["ap_mean"] and ab["m2"]["chosen_on"] == ["meat method half (A-to-C)"]
     assert chosen[("A-to-C", "cross_real", False)] == "m1"  # Silicone prefers m1
     # C-to-B: chosen on its Meat val trials; no Sim val split, so no sim_val rows
     assert chosen[("C-to-B", "cross_real", False)] == "m1" and not _rows(rows, config="C-to-B", selection="sim_val")
@@ -86,6 +87,44 @@ def test_scored_set_labels_never_choose(tmp_path):
     pick = lambda rows: [(r["method"], r["selection"], r["chosen"]) for r in _rows(rows, config="A-to-B")]  # noqa
     assert pick(before) == pick(after)
     assert [r["ap_mean"] for r in _rows(before, config="A-to-B")] != [r["ap_mean"] for r in _rows(after, config="A-to-B")]
+
+
+def test_cross_real_scores_the_method_half_and_refuses_a_checkpoint_chosen_on_all_of_it(tmp_path):
+    """A method that chose its checkpoint on Meat's selection half is scored on Meat's method half by its partner
+    run (`A-to-B.on_meat`), like every other method; the selection half's labels move no score; a checkpoint
+    chosen on all of Meat is refused."""
+    write_runs(tmp_path)
+    for s in SEEDS:  # m2 now chooses on Meat's selection half and scores Meat through its partner
+        meta = {"selected_on": "meat half", "selected_trials": ["t0", "t2", "t4"]}
+        ab = run_dir(tmp_path / "m2", "A-to-B", 5, s)
+        m = json.loads((ab / "metrics.json").read_text())
+        together = {"seeds": list(SEEDS), "configs": ["A-to-B", "A-to-B.on_meat"]}
+        save_json(ab / "metrics.json", {**m, **meta, "trained_together": together})
+        partner = run_dir(tmp_path / "m2", "A-to-B.on_meat", 5, s)
+        save_scores(partner / "scores.npz", _scores(SIGNAL["m2"]["meat"], 100 * s + 11))
+        save_json(partner / "metrics.json", {**m, **meta, "config": "A-to-B.on_meat", "test_on": "meat",
+                                             "trained_together": together})
+    rows = table(tmp_path, METHODS, ["A-to-B"], list(SEEDS), 5)
+    got = {r["method"]: r for r in _rows(rows, selection="cross_real")}
+    assert got["m2"]["chosen_on"] == ["meat method half (A-to-B.on_meat)"] and got["m2"]["chosen"]
+    rng = np.random.default_rng(5)
+    for m in METHODS:  # garbage labels on the selection half (even positions) of every Meat score
+        for config in ("A-to-C", "A-to-B.on_meat"):
+            for s in SEEDS:
+                path = run_dir(tmp_path / m, config, 5, s) / "scores.npz"
+                if path.exists():
+                    sc = load_scores(path)
+                    even = np.repeat(sc.sequence % 2 == 0, 127)
+                    save_scores(path, Scores(sc.probs, np.where(even, rng.integers(0, 2, sc.labels.size),
+                                                                sc.labels).astype(np.int8), sc.sequence, sc.frame))
+    again = {r["method"]: r["selection_score"] for r in _rows(table(tmp_path, METHODS, ["A-to-B"], list(SEEDS), 5),
+                                                                  selection="cross_real")}
+    assert again == {m: r["selection_score"] for m, r in got.items()}
+    for s in SEEDS:
+        ab = run_dir(tmp_path / "m2", "A-to-B", 5, s) / "metrics.json"
+        save_json(ab, {**json.loads(ab.read_text()), "selected_on": "meat all"})
+    with pytest.raises(ValueError, match="chosen on every meat trial"):
+        table(tmp_path, METHODS, ["A-to-B"], list(SEEDS), 5)
 
 
 def test_undeclared_transductive_method_and_missing_runs_are_refused(tmp_path):

@@ -18,6 +18,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from palpation.model.domain import partner_name
 from palpation.readers import one_line
 from palpation.report.runs import run_dir
 from palpation.transfer.report import CONFIGS, alignment_of, covers, read_methods
@@ -28,8 +29,17 @@ TEST_SETS = {"A-to-B": "silicone", "A-to-C": "meat", "C-to-B": "silicone"}
 def trained_apart(overrides: list[str]) -> bool:
     """Whether a method's configurations need trainings of their own (their checkpoint split or pseudo-labelled
     set depends on the scored set, so A-to-B's models cannot score A-to-C)."""
-    return "recipe.select_on=other_real" in overrides or any(
+    return any(o.startswith("recipe.select_on=other_real") for o in overrides) or any(
         o.startswith("recipe.pseudo=") and o != "recipe.pseudo=none" for o in overrides)
+
+
+def half_partner(overrides: list[str], config: str) -> list[str]:
+    """The cross_real partner a Sim-trained configuration of a method choosing on the other set's selection half
+    scores besides its own set: [`<config>.on_<set>`] (model.domain.partner_name), else []."""
+    if "recipe.select_on=other_real_half" not in overrides or config == "C-to-B":
+        return []
+    other = "meat" if TEST_SETS[config] == "silicone" else "silicone"
+    return [partner_name(config, other)]
 
 
 def stage(overrides: list[str]) -> str:
@@ -47,7 +57,7 @@ def trainings(methods: dict) -> list[tuple[str, str, list[str]]]:
         if not trained_apart(spec["overrides"]) and {"A-to-B", "A-to-C"} <= set(configs):
             out.append((name, "A-to-B", ["A-to-B", "A-to-C"]))
             configs = [c for c in configs if c not in ("A-to-B", "A-to-C")]
-        out += [(name, c, [c]) for c in configs]
+        out += [(name, c, [c, *half_partner(spec["overrides"], c)]) for c in configs]
     return sorted(out, key=lambda t: stage(methods[t[0]]["overrides"]) == "students")
 
 
@@ -59,7 +69,8 @@ def scored_with(methods: dict, method: str, scored: list[str]) -> list[str]:
 
 def command(root: str, methods: dict, method: str, config: str, scored: list[str], seeds: list[int], device: str,
             clip_len: int, python: str, extra: list[str]) -> list[str]:
-    also = [f"also_test=[{c}:{TEST_SETS[c]}]" for c in scored if c != config]
+    sets = {c: TEST_SETS.get(c) or c.rsplit(".on_", 1)[1] for c in scored}  # a partner names its set
+    also = [f"also_test=[{','.join(f'{c}:{sets[c]}' for c in scored if c != config)}]"] if len(scored) > 1 else []
     aligned = [":".join([*alignment_of(methods[m]["overrides"]), str(Path(root) / m)])
                for m in scored_with(methods, method, scored)]
     also += [f"also_aligned=[{','.join(aligned)}]"] if aligned else []

@@ -49,7 +49,7 @@ SelectMetric = StrEnum("SelectMetric", {m: m for m in ("fg_iou", "ap")})
 Calibration = StrEnum("Calibration", {m: m for m in ("none", "temperature", "platt", "cross_real")})
 Align = StrEnum("Align", {m: m for m in ALIGN_METHODS})
 AlignStats = StrEnum("AlignStats", {m: m for m in ALIGN_STATS})
-SelectOn = StrEnum("SelectOn", {m: m for m in ("val", "other_real")})
+SelectOn = StrEnum("SelectOn", {m: m for m in ("val", "other_real", "other_real_half")})
 Pseudo = StrEnum("Pseudo", {m: m for m in ("none", "other_real", "test_set")})
 DATASETS = ("sim", "silicone", "meat")  # train_on / test_on: the sets graph.sources.load_dataset reads
 CHOICES = {"norm_stats": NormStats, "rotation": Rotation, "schedule": Schedule, "select_metric": SelectMetric,
@@ -90,7 +90,8 @@ class TrainConfig:
     # onto the training clips' moments at scoring (graph.align: none | meanstd | coral) from the clips that
     # align_stats names (other_real: inductive; test_set / test_sequence: the scored set's own inputs, transductive).
     # select_on: the split that chooses the checkpoint, stops early and fits a calibration (val: the training
-    # domain's; other_real: the labelled real set other than the scored one, its val trials if it is the training set)
+    # domain's; other_real: the labelled real set other than the scored one, its val trials if it is the training set;
+    # other_real_half: its selection half, so the other half can score the method: model.domain.half_trials)
     align: str = "none"
     align_stats: str = "other_real"
     select_on: str = "val"

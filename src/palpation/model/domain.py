@@ -9,6 +9,7 @@ the Meat val trials (never the trials it trained on) and has no other real set t
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 
 import numpy as np
 
@@ -28,25 +29,54 @@ def other_real_set(test_on: str) -> str:
     return REAL_SETS[1 - REAL_SETS.index(test_on)]
 
 
+def half_trials(ids) -> tuple[list, list]:
+    """A real set's trials in two halves, by sorted id, alternating: (the selection half, the method half). With
+    select_on=other_real_half the first chooses a run's checkpoint, and the second is left to score the method
+    (the transfer table's cross_real rule), so no trial does both."""
+    ids = sorted(ids)
+    return ids[0::2], ids[1::2]
+
+
+def is_partner(config_name: str) -> bool:
+    """A run scoring the other real set only for the cross_real rule: also_test's '<config>.on_<set>'."""
+    return ".on_" in config_name
+
+
+def partner_name(config_name: str, other: str) -> str:
+    return f"{config_name}.on_{other}"
+
+
 def selection_name(job) -> str:
-    """The set that chooses `job`'s checkpoint: '<set> val' or '<set> all' (the other real set, whole)."""
+    """The set that chooses `job`'s checkpoint: '<set> val', '<set> all' (the other real set, whole) or '<set> half'
+    (its selection half, half_trials)."""
     if job.train.select_on == "val":
         return f"{job.train_on} val"
     other = other_real_set(job.test_on)
-    return f"{other} val" if other == job.train_on else f"{other} all"
+    if other == job.train_on:
+        return f"{other} val"
+    return f"{other} half" if job.train.select_on == "other_real_half" else f"{other} all"
 
 
 def selection_sequences(job) -> Sequences:
     """The sequences `select_on` names (checkpoint, early stopping, a val calibration)."""
     name, split = selection_name(job).split(" ")
-    return load_dataset(name, job.data[name], "test" if split == "all" else split)
+    seqs = load_dataset(name, job.data[name], "val" if split == "val" else "test")
+    if split == "half":
+        keep = set(half_trials(seqs.ids)[0])
+        idx = [i for i, t in enumerate(seqs.ids) if t in keep]
+        seqs = replace(seqs, ids=[seqs.ids[i] for i in idx], markers=[seqs.markers[i] for i in idx],
+                       labels=[seqs.labels[i] for i in idx])
+    return seqs
 
 
 def check_selection(jobs) -> None:
     """Refuse jobs sharing one training (the first job's checkpoint split) when one is scored on that split's set
-    (the training set's own test split aside: Sim val vs Sim test)."""
-    chosen_on = selection_name(jobs[0]).split(" ")[0]
+    (the training set's own test split aside: Sim val vs Sim test), unless the split is a half and the job a
+    cross_real partner (is_partner: the table reads only the other half of its scores)."""
+    chosen_on, split = selection_name(jobs[0]).split(" ")
     for job in jobs:
+        if split == "half" and is_partner(job.config_name):
+            continue
         if chosen_on == job.test_on != job.train_on:
             raise ValueError(f"{job.config_name}: select_on={job.train.select_on} chooses the checkpoint on "
                              f"{selection_name(jobs[0])}, the set it is scored on; score that set with separate runs")

@@ -32,7 +32,8 @@ from palpation.metrics.classification import marker_metrics
 from palpation.metrics.scores import Scores, save_scores
 from palpation.model.checkpoint import checkpoint_bytes, save_checkpoint
 from palpation.model.config import ModelConfig, TrainConfig
-from palpation.model.domain import alignment, check_selection, selection_name, selection_sequences
+from palpation.model.domain import (alignment, check_selection, is_partner, selection_name,
+                                    selection_sequences)
 from palpation.model.evaluate import predict
 from palpation.model.stgnn import count_parameters
 from palpation.model.restarts import fit_restarts, fit_seeds_restarts
@@ -122,6 +123,17 @@ def scoring_key(job: TrainJob) -> tuple[str, str, str, str]:
     return job.config_name, job.test_on, job.train.align, job.train.align_stats
 
 
+def selection_record(job: TrainJob) -> dict:
+    """metrics.json's record of where the training's checkpoint was chosen (nothing for the val split): the set and,
+    for a half, its trials (the other half may score the method). Jobs trained together carry the first job's."""
+    if job.train.select_on == "val":
+        return {}
+    out = {"selected_on": selection_name(job)}
+    if out["selected_on"].endswith(" half"):
+        out["selected_trials"] = [str(t) for t in selection_sequences(job).ids]
+    return out
+
+
 def _run_tags(job: TrainJob, tags: dict | None) -> dict:
     return {"config": job.config_name, "seed": str(job.seed), "clip_len": str(job.clip_len),
             "model": job.model.name, "device": job.train.device, **(tags or {})}
@@ -141,7 +153,7 @@ def run_job(job: TrainJob, out_dir: str | Path, params: dict | None = None, trac
                          "set; train with seeds=[...] and also_test=[<config>:<set>] (e.g. A-to-B with "
                          "also_test=[A-to-C:meat]), or use calibration=platt")
     others = list(also)
-    if others and job.train.pseudo != "none":
+    if [o for o, *_ in others if not is_partner(o.config_name)] and job.train.pseudo != "none":
         raise ValueError(PSEUDO_APART.format(job.config_name))
     if any(training_key(o) != training_key(job) or o.seed != job.seed or o.train != job.train for o, *_ in others):
         raise ValueError(f"also: configurations scored by {job.config_name}'s model must train alike (same seed, "
@@ -162,7 +174,7 @@ def run_job(job: TrainJob, out_dir: str | Path, params: dict | None = None, trac
                                         progress=progress)
         if not others:
             return finish_job(job, result, d, out_dir, track, progress, restarts)
-        shared = {**restarts, "trained_together": {
+        shared = {**restarts, **selection_record(job), "trained_together": {
             "seeds": [job.seed], "train_seconds": result.train_seconds,
             "configs": [job.config_name] + [o.config_name for o, *_ in others]}}
         share = replace(result, train_seconds=result.train_seconds / (1 + len(others)))
@@ -205,10 +217,11 @@ def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: 
     if len(set(keys)) != len(jobs) or len(jobs) != len(seeds) * len(outputs):
         raise ValueError(f"jobs trained together need every seed {seeds} once with every (test set, alignment, "
                          f"calibration) {outputs}")
-    if len(tests) > 1 and first.train.pseudo != "none":
+    if len([t for t in tests if not is_partner(t[0])]) > 1 and first.train.pseudo != "none":
         raise ValueError(PSEUDO_APART.format(first.config_name))
     partner = {j.config_name: cross_real_partner(j, tests) for j in jobs if j.train.calibration == "cross_real"}
     check_selection(jobs)
+    chosen_on = selection_record(first)
     d = load_job_data(first)
     results, restarts = fit_seeds_restarts(d.train, d.val, d.rest, d.topo, first.model, first.train, seeds,
                                            progress=progress)
@@ -248,7 +261,8 @@ def run_jobs_together(jobs: list[TrainJob], out_dirs: list[str | Path], params: 
                 other = next(k for k in scorings if k[0] == partner[job.config_name] and k[2:] == key[2:])
                 fit_on = (*scored[(other, job.seed)][:2], partner[job.config_name])
             out.append(finish_job(job, result, replace(d, test=test_sets[job.config_name]), out_dir, track,
-                                  progress, {**restarts[job.seed], "trained_together": together, **aligned[key]},
+                                  progress, {**restarts[job.seed], **chosen_on, "trained_together": together,
+                                             **aligned[key]},
                                   scored[(key, job.seed)], fit_on))
     return out
 
@@ -271,7 +285,7 @@ def finish_job(job: TrainJob, result: FitResult, d: JobData, out_dir: str | Path
     that calibration=cross_real is fitted on."""
     out_dir = Path(out_dir)
     rest, topo, val, test = d.rest, d.topo, d.val, d.test
-    transfer = {"selected_on": selection_name(job)} if job.train.select_on != "val" else {}
+    transfer = selection_record(job)
     if scored is None:
         t0 = time.perf_counter()
         align = alignment(job, d.train, test, rest, topo)

@@ -18,7 +18,9 @@ from palpation.io import csv_text, save_json, save_text
 from palpation.metrics.calibration import positive_share
 from palpation.metrics.classification import marker_metrics
 from palpation.metrics.scores import Scores
+from palpation.model.domain import other_real_set, partner_name
 from palpation.readers import read_yaml
+from palpation.report.runs import run_dir
 from palpation.transfer.selection import SELECTIONS, Run, choose, crossfit_by_trials, read_run, selection_score
 
 COLUMNS = ("config", "method", "selection", "transductive", "chosen", "seeds", "ap_mean", "ap_std", "auroc_mean",
@@ -115,6 +117,14 @@ def table(root: str | Path, methods: dict[str, dict], configs: list[str], seeds:
     runs = {(m, c): [read_run(root, m, c, clip_len, s) for s in seeds] for m in every for c in configs
             if covers(every[m], c)}
     by_method = {m: [r for c in configs if (m, c) in runs for r in runs[(m, c)]] for m in every}
+    for m in every:  # a configuration left out of the rows may still hold a run's cross_real partner (A-to-C)
+        for c in [c for c in CONFIGS if c not in configs and covers(every[m], c)]:
+            if all((run_dir(Path(root) / m, c, clip_len, s) / "metrics.json").is_file() for s in seeds):
+                by_method[m] += [read_run(root, m, c, clip_len, s) for s in seeds]
+    for (m, c), rs in runs.items():  # the cross_real partners of runs that chose on the other set's selection half
+        if rs[0].metrics.get("selected_on", "").endswith(" half"):
+            partner = partner_name(c, other_real_set(rs[0].metrics["test_on"]))
+            by_method[m] += [read_run(root, m, partner, clip_len, s) for s in seeds]
     rows = []
     for config in configs:
         methods = {m: spec for m, spec in every.items() if covers(spec, config)}

@@ -7,9 +7,11 @@ score from data other than the scored set, and the method with the highest mean 
 
 * `sim_val`: the run's best-epoch AP on the Sim validation split (history `val/ap`; Sim-trained runs whose
   checkpoint was chosen there);
-* `cross_real`: AP on the labelled real set that the run is not scored on: the run's own checkpoint split when
-  that is the other real set (select_on=other_real, or a Meat-trained model's Meat val trials), else the same
-  models' scores on the other real set (A-to-B's models scored on Meat as A-to-C, trained together: also_test).
+* `cross_real`: AP on the labelled real set that the run is not scored on, on its *method half* of trials
+  (model.domain.half_trials), from the same models' scores on that set (A-to-B's models scored on Meat as A-to-C,
+  trained together: also_test; a run that chose its checkpoint on the other half, select_on=other_real_half, scores
+  it as its partner `<config>.on_<set>`); a Meat-trained run (C-to-B), whose every method chose on the Meat val
+  trials alike, by that checkpoint split's AP. A run that chose on every trial of the other set is refused.
 
 A scored set's labels are never read here: the scored run's own scores.npz is read only by the report. Where one
 set must both choose and be scored, `crossfit_by_trials` chooses for each fold of its trials on the other folds.
@@ -24,7 +26,7 @@ import numpy as np
 from sklearn.metrics import average_precision_score
 
 from palpation.metrics.scores import Scores, load_scores
-from palpation.model.domain import other_real_set
+from palpation.model.domain import other_real_set, partner_name
 from palpation.readers import read_json
 from palpation.report.runs import run_dir
 
@@ -81,14 +83,30 @@ def selection_score(run: Run, selection: str, runs: list[Run]) -> tuple[float, s
     if selection != "cross_real":
         raise ValueError(f"unknown selection {selection!r}: use one of {list(SELECTIONS)}")
     other = other_real_set(m["test_on"])
-    if checkpoint_split(run).split(" ")[0] == other:
-        return val_ap(run), checkpoint_split(run)
+    split = checkpoint_split(run)
+    if split == f"{other} val":  # a Meat-trained run: every method chose on the Meat val trials alike
+        return val_ap(run), split
+    if split == f"{other} all":
+        raise ValueError(f"{run.path}: its checkpoint was chosen on every {other} trial, the method half that the "
+                         f"cross_real rule scores on included; train it with recipe.select_on=other_real_half")
     partners = [r for r in runs if r.method == run.method and r.metrics["test_on"] == other and same_models(run, r)]
     if not partners:
         raise ValueError(f"{run.path}: cross_real needs the same models scored on {other} (train {run.config} with "
-                         f"also_test=[<config>:{other}]) or a checkpoint chosen on it (recipe.select_on=other_real)")
+                         f"also_test=[<config>:{other}], or [{partner_name(run.config, other)}:{other}] beside "
+                         "recipe.select_on=other_real_half)")
     s = partners[0].scores()
-    return float(average_precision_score(s.labels, s.probs)), f"{other} all ({partners[0].config})"
+    return _trial_ap([s], METHOD_HALF), f"{other} method half ({partners[0].config})"
+
+
+class _OddPositions:
+    """The method half of a real set's trials (model.domain.half_trials): odd positions of its sorted trials, which
+    are the sequence indices of its scores (the set loads sorted)."""
+
+    def __contains__(self, index) -> bool:
+        return int(index) % 2 == 1
+
+
+METHOD_HALF = _OddPositions()
 
 
 def choose(scores: dict[str, list[float] | None]) -> str | None:
@@ -98,10 +116,10 @@ def choose(scores: dict[str, list[float] | None]) -> str | None:
 
 
 def _trial_ap(scores: list[Scores], keep) -> float:
-    """Mean over seeds of the AP on the markers of the trials `keep` (a set of sequence indices)."""
+    """Mean over seeds of the AP on the markers of the trials `keep` (sequence indices: a set, or METHOD_HALF)."""
     out = []
     for s in scores:
-        rows = np.repeat(np.isin(s.sequence, list(keep)), len(s.probs) // len(s.sequence))
+        rows = np.repeat(np.array([t in keep for t in s.sequence], bool), len(s.probs) // len(s.sequence))
         out.append(float(average_precision_score(s.labels[rows], s.probs[rows])))
     return float(np.mean(out))
 
