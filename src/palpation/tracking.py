@@ -44,7 +44,7 @@ def check_store() -> None:
     a database, or the file or its folder not writable. Other stores (a server) are left to MLflow."""
     if importlib.util.find_spec("mlflow") is None:  # a bare machine (a lent GPU) may lack it: say so before the work
         raise ValueError("track=true logs to MLflow, which this Python cannot import; install the lock's "
-                                  "mlflow (pip install mlflow==3.17.2) or pass track=false")
+                         "mlflow (pip install mlflow==3.17.2) or pass track=false")
     uri = tracking_uri()
     if not uri.startswith("sqlite:///"):
         return

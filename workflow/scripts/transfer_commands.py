@@ -18,7 +18,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from palpation.model.domain import partner_name
+from palpation.model.domain import other_real_set, partner_name
 from palpation.readers import one_line
 from palpation.report.runs import run_dir
 from palpation.transfer.report import CONFIGS, alignment_of, covers, read_methods
@@ -38,8 +38,7 @@ def half_partner(overrides: list[str], config: str) -> list[str]:
     scores besides its own set: [`<config>.on_<set>`] (model.domain.partner_name), else []."""
     if "recipe.select_on=other_real_half" not in overrides or config == "C-to-B":
         return []
-    other = "meat" if TEST_SETS[config] == "silicone" else "silicone"
-    return [partner_name(config, other)]
+    return [partner_name(config, other_real_set(TEST_SETS[config]))]
 
 
 def stage(overrides: list[str]) -> str:
@@ -69,7 +68,7 @@ def scored_with(methods: dict, method: str, scored: list[str]) -> list[str]:
 
 def command(root: str, methods: dict, method: str, config: str, scored: list[str], seeds: list[int], device: str,
             clip_len: int, python: str, extra: list[str]) -> list[str]:
-    sets = {c: TEST_SETS.get(c) or c.rsplit(".on_", 1)[1] for c in scored}  # a partner names its set
+    sets = {c: TEST_SETS.get(c) or other_real_set(TEST_SETS[config]) for c in scored}  # a partner: the other set
     also = [f"also_test=[{','.join(f'{c}:{sets[c]}' for c in scored if c != config)}]"] if len(scored) > 1 else []
     aligned = [":".join([*alignment_of(methods[m]["overrides"]), str(Path(root) / m)])
                for m in scored_with(methods, method, scored)]

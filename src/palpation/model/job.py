@@ -285,7 +285,7 @@ def finish_job(job: TrainJob, result: FitResult, d: JobData, out_dir: str | Path
     that calibration=cross_real is fitted on."""
     out_dir = Path(out_dir)
     rest, topo, val, test = d.rest, d.topo, d.val, d.test
-    transfer = selection_record(job)
+    transfer = {} if "selected_on" in (extra or {}) else selection_record(job)  # trained together: the first's
     if scored is None:
         t0 = time.perf_counter()
         align = alignment(job, d.train, test, rest, topo)

@@ -163,6 +163,11 @@ class Gap:
     within: bool | None  # within seed noise; None where no noise scale exists
 
 
+def truthy(v) -> bool:
+    """A CSV cell read as a flag: "true" / "1" (any case) is true."""
+    return str(v).strip().lower() in ("true", "1")
+
+
 def aim_miss(value: float, sense: str, target: float) -> float:
     """How far `value` misses an issue's aim `sense target` (">=" or "<="); 0 where it is met."""
     return max(0.0, target - value) if sense == ">=" else max(0.0, value - target)

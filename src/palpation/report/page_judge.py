@@ -7,7 +7,7 @@ import math
 
 import pandas as pd
 
-from palpation.report.compare import TITLES, Section, aim_lines, aim_miss
+from palpation.report.compare import TITLES, Section, aim_lines, aim_miss, truthy
 from palpation.report.markdown import markdown, num
 from palpation.report.twin_selection import TIE_ALPHA, TIE_MIN_GAIN_PX
 
@@ -17,14 +17,10 @@ AIMS = (("silicone_ap_crossfit", ">=", 0.36, "chosen"), ("meat_ap", ">=", 0.26, 
 MAE_DROP = 0.30  # the slide-loop twin's held-out MAE >= 30 % below the calibrated twin's
 
 
-def _truthy(v) -> bool:
-    return str(v).strip().lower() in ("true", "1")
-
-
 def aim_checks(df: pd.DataFrame) -> list[tuple[str, str, float, str, float, float]]:
     """(twin, column, value, sense, target, miss) of every aim the table can check; miss 0 = met."""
     out = []
-    chosen = df[df["chosen"].map(_truthy)]
+    chosen = df[df["chosen"].map(truthy)]
     for col, sense, target, _ in AIMS:
         for _, r in chosen.iterrows():
             v = float(r[col])
@@ -71,7 +67,7 @@ def reachable(df: pd.DataFrame, bounds: pd.DataFrame) -> list[str]:
     b = bounds.set_index("predictor")
     part = lambda names: ", ".join(f"{n.replace('_', ' ')} {b.loc[n, 'heldout_mae_px']:.3f} px "
                                    f"({100 * b.loc[n, 'change_vs_no_motion']:+.1f} %)" for n in names if n in b.index)
-    own = [n for n in b.index if _truthy(b.loc[n, "uses_heldout_truth"])]
+    own = [n for n in b.index if truthy(b.loc[n, "uses_heldout_truth"])]
     shared = [n for n in b.index if n not in own and n != "no_motion"]
     text = (f"What the slide-loop aim asks: a held-out MAE <= {target:.3f} px ({100 * MAE_DROP:.0f} % below "
             f"calibrated's {by['calibrated']:.3f}). Without a twin (`judge/drift_bounds.csv`, against no motion "
@@ -91,7 +87,7 @@ def twin_selection_section(df: pd.DataFrame, rounds: pd.DataFrame | None = None,
              f"{num(r['vessel_ratio_sim'], 2)} / {num(r['vessel_ratio_real'], 2)}", num(r["silicone_ap_crossfit"]),
              num(r["silicone_auroc_crossfit"]), num(r["meat_ap"]), num(r["meat_auroc"]),
              f"{100 * float(r['silicone_pos_share_05']):.1f} %", int(r["seeds"]),
-             "**yes**" if _truthy(r["chosen"]) else ""] for _, r in df.iterrows()]
+             "**yes**" if truthy(r["chosen"]) else ""] for _, r in df.iterrows()]
     bullets, gaps = aim_lines(aim_checks(df), str)
     body = ("Each candidate twin made a Sim set; A-to-B and A-to-C models were trained on it (mean over seeds). "
             "Silicone is cross-fitted: each trial is scored only by models whose twin never saw it (the slide "

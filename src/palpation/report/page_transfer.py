@@ -7,24 +7,19 @@ from __future__ import annotations
 import pandas as pd
 
 from palpation.report import paper
-from palpation.report.compare import TITLES, Section, aim_lines, aim_miss
+from palpation.report.compare import TITLES, Section, aim_lines, aim_miss, truthy
 from palpation.report.markdown import markdown, num
 
 # config: (AP aim of the inductive method cross-real selection picks, the std aim over five seeds)
 AIMS = {"A-to-B": (0.40, 0.02), "A-to-C": (0.30, 0.02)}
-SET_OF = {"A-to-B": "silicone", "A-to-C": "meat", "C-to-B": "silicone"}
-
-
-def _truthy(v) -> bool:
-    return str(v).strip().lower() in ("true", "1")
 
 
 def aim_checks(df: pd.DataFrame) -> list[tuple[str, str, float, str, float, float]]:
     """(row label, column, value, sense, target, miss) of the AP and std aims, on the inductive cross_real choice."""
     out = []
     for config, (ap_aim, std_aim) in AIMS.items():
-        pick = df[(df["config"] == config) & (df["selection"] == "cross_real") & df["chosen"].map(_truthy)
-                  & ~df["transductive"].map(_truthy)]
+        pick = df[(df["config"] == config) & (df["selection"] == "cross_real") & df["chosen"].map(truthy)
+                  & ~df["transductive"].map(truthy)]
         for _, r in pick.iterrows():
             label = f"{config} {r['method']} (cross_real, inductive)"
             out.append((label, "AP", float(r["ap_mean"]), ">=", ap_aim, aim_miss(float(r["ap_mean"]), ">=", ap_aim)))
@@ -49,18 +44,18 @@ def transfer_section(df: pd.DataFrame, details: dict | None = None, meat_meta: d
     chosen_on = {(r["config"], r["method"], r["selection"]): r.get("chosen_on") or []
                  for r in (details or {}).get("rows", [])}
     picks = []
-    for _, r in df[df["chosen"].map(_truthy)].iterrows():
+    for _, r in df[df["chosen"].map(truthy)].iterrows():
         ref = paper.SEED_SWEEP.get(r["config"], {})
         on = ", ".join(chosen_on.get((r["config"], r["method"], r["selection"]), [])) or "–"
         picks.append([f"{r['config']} ({paper.CONFIG_TITLES.get(r['config'], '')})", r["selection"],
-                      "transductive" if _truthy(r["transductive"]) else "inductive", r["method"], on,
+                      "transductive" if truthy(r["transductive"]) else "inductive", r["method"], on,
                       f"{num(r['ap_mean'])} ± {num(r['ap_std'])}", num(r["auroc_mean"]),
                       f"{num(ref['ap'][0])} / {num(ref['auroc'][0])}" if ref else "–"])
     every = df.drop_duplicates(["config", "method"])
-    rows = [[r["config"], r["method"], "yes" if _truthy(r["transductive"]) else "", f"{num(r['ap_mean'])} ± "
+    rows = [[r["config"], r["method"], "yes" if truthy(r["transductive"]) else "", f"{num(r['ap_mean'])} ± "
              f"{num(r['ap_std'])}", num(r["auroc_mean"]), f"{100 * float(r['pos_share_05']):.1f} %",
              ", ".join(sorted(set(df[(df["config"] == r["config"]) & (df["method"] == r["method"])
-                                     & df["chosen"].map(_truthy)]["selection"])))]
+                                     & df["chosen"].map(truthy)]["selection"])))]
             for _, r in every.iterrows()]
     bullets, gaps = aim_lines(aim_checks(df), str)
     body = ("Per configuration, every candidate method (`conf/transfer/methods.yaml`) trained with five seeds on the "

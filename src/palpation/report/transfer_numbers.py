@@ -4,15 +4,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from palpation.report.compare import truthy
 from palpation.report.records import record_csv as _csv
 
 
 def transfer_choice(results: Path, config: str, transductive: bool = False) -> str:
     """The method the cross_real rule chose for `config` (docs/results/transfer.csv), its AP, and the reference's."""
     table = _csv(results, "transfer.csv", ("config", "method", "selection", "transductive", "chosen", "ap_mean",
-                                           "ap_std")).astype({"chosen": str, "transductive": str})
+                                           "ap_std"))
     rows = table.query("config == @config and selection == 'cross_real'")
-    pick = rows[(rows["chosen"].str.lower() == "true") & (rows["transductive"].str.lower() == str(transductive).lower())]
+    pick = rows[rows["chosen"].map(truthy) & (rows["transductive"].map(truthy) == transductive)]
     ref = rows[rows["method"] == "reference"]
     if len(pick) != 1 or len(ref) != 1:
         raise ValueError(f"record {results / 'transfer.csv'}: no single cross_real choice and reference row of "

@@ -26,7 +26,7 @@ import numpy as np
 from sklearn.metrics import average_precision_score
 
 from palpation.metrics.scores import Scores, load_scores
-from palpation.model.domain import other_real_set, partner_name
+from palpation.model.domain import half_trials, other_real_set, partner_name
 from palpation.readers import read_json
 from palpation.report.runs import run_dir
 
@@ -95,18 +95,8 @@ def selection_score(run: Run, selection: str, runs: list[Run]) -> tuple[float, s
                          f"also_test=[<config>:{other}], or [{partner_name(run.config, other)}:{other}] beside "
                          "recipe.select_on=other_real_half)")
     s = partners[0].scores()
-    return _trial_ap([s], METHOD_HALF), f"{other} method half ({partners[0].config})"
-
-
-class _OddPositions:
-    """The method half of a real set's trials (model.domain.half_trials): odd positions of its sorted trials, which
-    are the sequence indices of its scores (the set loads sorted)."""
-
-    def __contains__(self, index) -> bool:
-        return int(index) % 2 == 1
-
-
-METHOD_HALF = _OddPositions()
+    method_half = half_trials(np.unique(s.sequence).tolist())[1]  # the set loads sorted: indices order as trials
+    return _trial_ap([s], method_half), f"{other} method half ({partners[0].config})"
 
 
 def choose(scores: dict[str, list[float] | None]) -> str | None:
@@ -116,10 +106,10 @@ def choose(scores: dict[str, list[float] | None]) -> str | None:
 
 
 def _trial_ap(scores: list[Scores], keep) -> float:
-    """Mean over seeds of the AP on the markers of the trials `keep` (sequence indices: a set, or METHOD_HALF)."""
+    """Mean over seeds of the AP on the markers of the trials `keep` (sequence indices)."""
     out = []
     for s in scores:
-        rows = np.repeat(np.array([t in keep for t in s.sequence], bool), len(s.probs) // len(s.sequence))
+        rows = np.repeat(np.isin(s.sequence, list(keep)), len(s.probs) // len(s.sequence))
         out.append(float(average_precision_score(s.labels[rows], s.probs[rows])))
     return float(np.mean(out))
 
