@@ -175,3 +175,22 @@ def test_script_writes_exactly_the_columns_and_the_shipped_methods_read(tmp_path
                         str(tmp_path / "runs"), "--methods", str(methods), "--out", str(out)], capture_output=True,
                        text=True)
     assert r.returncode == 1 and "needs exactly the keys" in r.stderr
+
+
+def test_left_out_methods_leave_no_row_and_are_recorded(tmp_path):
+    write_runs(tmp_path / "runs")
+    methods = tmp_path / "methods.yaml"
+    methods.write_text("methods:\n" + "".join(
+        f"  {m}:\n    about: {v['about']}\n    transductive: {str(v['transductive']).lower()}\n    overrides: []\n"
+        for m, v in METHODS.items()))
+    left = sorted(METHODS)[-1]
+    out = tmp_path / "transfer.csv"
+    script = [sys.executable, str(REPO_ROOT / "workflow/scripts/transfer_table.py"), "--runs-root",
+              str(tmp_path / "runs"), "--methods", str(methods), "--seeds", "0", "1", "2", "--out", str(out)]
+    r = subprocess.run(script + ["--leave-out", left], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    with open(out) as f:
+        assert left not in {row["method"] for row in csv.DictReader(f)}
+    assert json.loads(out.with_suffix(".json").read_text())["left_out"] == [left]
+    r = subprocess.run(script + ["--leave-out", "no_such_method"], capture_output=True, text=True)
+    assert r.returncode == 1 and "no_such_method" in r.stderr and r.stderr.count("\n") == 1

@@ -39,6 +39,14 @@ def decoded_reference(meat_meta: dict | None) -> str:
             "`Positive at 0.5` column of A-to-C.")
 
 
+def left_out_note(methods: list[str]) -> str:
+    """The methods of conf/transfer/methods.yaml whose rows the table left out (transfer_table.py --leave-out)."""
+    if not methods:
+        return ""
+    return (f"\nLeft out of this table, their runs not yet redone under the current selection rule: "
+            f"{', '.join(f'`{m}`' for m in methods)} (`transfer_table.py --leave-out`).")
+
+
 def transfer_section(df: pd.DataFrame, details: dict | None = None, meat_meta: dict | None = None) -> Section:
     """The table's rows per configuration, the choices with what chose them (`details`: transfer.json), the aims."""
     chosen_on = {(r["config"], r["method"], r["selection"]): r.get("chosen_on") or []
@@ -66,6 +74,7 @@ def transfer_section(df: pd.DataFrame, details: dict | None = None, meat_meta: d
             "(SPEC §15.3, mean over seeds)." + decoded_reference(meat_meta) + "\n\n"
             + markdown(["Config", "Selection", "Kind", "Chosen", "Chosen on", "AP (mean ± std)", "AUROC",
                         "Paper AP / AUROC"], picks)
+            + left_out_note((details or {}).get("left_out", []))
             + "\n\nEvery method (the rows are the same for both rules; `transfer/transfer.csv`):\n\n"
             + markdown(["Config", "Method", "Transductive", "AP (mean ± std)", "AUROC", "Positive at 0.5",
                         "Chosen by"], rows))

@@ -162,9 +162,13 @@ def _crossfit_rows(config, methods, scored, flag, base, n_folds) -> list[dict]:
     return rows
 
 
-def write_table(rows: list[dict], out_csv: str | Path) -> None:
-    """The CSV (COLUMNS, 4 decimals) and `<stem>.json` beside it with every row's selection details."""
+def write_table(rows: list[dict], out_csv: str | Path, left_out: list[str] = ()) -> None:
+    """The CSV (COLUMNS, 4 decimals) and `<stem>.json` beside it with every row's selection details (and the
+    methods whose rows were left out, where any were)."""
     out_csv = Path(out_csv)
     shown = [{**r, "transductive": str(r["transductive"]).lower(), "chosen": str(r["chosen"]).lower()} for r in rows]
     save_text(out_csv, csv_text(shown, COLUMNS, 4))
-    save_json(out_csv.with_suffix(".json"), {"columns": list(COLUMNS), "rows": rows})
+    record = {"columns": list(COLUMNS), "rows": rows}
+    if left_out:
+        record["left_out"] = list(left_out)
+    save_json(out_csv.with_suffix(".json"), record)
