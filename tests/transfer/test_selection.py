@@ -152,12 +152,17 @@ def test_crossfit_chooses_each_fold_on_the_other_folds_only():
     assert crossfit_by_trials(perfect, 2)["choices"][0] == "m1"
 
 
-def test_script_writes_exactly_the_columns_and_the_shipped_methods_read(tmp_path):
-    write_runs(tmp_path / "runs")
-    methods = tmp_path / "methods.yaml"
-    methods.write_text("methods:\n" + "".join(
+def write_methods(path):
+    """METHODS as a methods file (conf/transfer/methods.yaml's format), every method without overrides."""
+    path.write_text("methods:\n" + "".join(
         f"  {m}:\n    about: {v['about']}\n    transductive: {str(v['transductive']).lower()}\n    overrides: []\n"
         for m, v in METHODS.items()))
+    return path
+
+
+def test_script_writes_exactly_the_columns_and_the_shipped_methods_read(tmp_path):
+    write_runs(tmp_path / "runs")
+    methods = write_methods(tmp_path / "methods.yaml")
     out = tmp_path / "docs" / "transfer.csv"
     r = subprocess.run([sys.executable, str(REPO_ROOT / "workflow/scripts/transfer_table.py"), "--runs-root",
                         str(tmp_path / "runs"), "--methods", str(methods), "--seeds", "0", "1", "2", "--out", str(out),
@@ -179,10 +184,7 @@ def test_script_writes_exactly_the_columns_and_the_shipped_methods_read(tmp_path
 
 def test_left_out_methods_leave_no_row_and_are_recorded(tmp_path):
     write_runs(tmp_path / "runs")
-    methods = tmp_path / "methods.yaml"
-    methods.write_text("methods:\n" + "".join(
-        f"  {m}:\n    about: {v['about']}\n    transductive: {str(v['transductive']).lower()}\n    overrides: []\n"
-        for m, v in METHODS.items()))
+    methods = write_methods(tmp_path / "methods.yaml")
     left = sorted(METHODS)[-1]
     out = tmp_path / "transfer.csv"
     script = [sys.executable, str(REPO_ROOT / "workflow/scripts/transfer_table.py"), "--runs-root",
