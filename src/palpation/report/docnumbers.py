@@ -296,6 +296,8 @@ NUMBERS: dict[str, Callable[[Path], str]] = {
     "twin_ablation": twin_ablation,
     "transfer.silicone": lambda r: transfer_choice(r, "A-to-B"),
     "transfer.meat": lambda r: transfer_choice(r, "A-to-C"),
+    "transfer.silicone_transductive": lambda r: transfer_choice(r, "A-to-B", transductive=True),
+    "transfer.meat_transductive": lambda r: transfer_choice(r, "A-to-C", transductive=True),
     "wall.quick": lambda r: last_wall_time(r, "quick"),
     "wall.paper": lambda r: last_wall_time(r, "paper"),
     "twin.streamed": lambda r: twin_batch_time(r, "streamed"),
