@@ -14,14 +14,14 @@ from pathlib import Path
 from palpation.readers import read_json
 from palpation.report import paper
 from palpation.report.loop_numbers import (
-    bench_loop, dev_choice, fixed_exact_share, fixed_inlist_unexplained, fixed_summary, general_below_power,
+    LOOP_DEV_KEYS, bench_loop, fixed_exact_share, fixed_inlist_unexplained, fixed_summary, general_below_power,
     general_by_effect, general_exact_of, general_oracle, general_shared, general_soft_e, general_split,
     general_summary, loop_change, loop_effects, loop_last, loop_rest_ratio, loop_same_table, loop_target,
-    reduced_converged, reduced_mae_after, reduced_run_after, selftest_runs, strength_floor, verdict_rescore,
+    reduced_converged, reduced_mae_after, reduced_run_after, selftest_runs,
 )
 from palpation.report.maps_numbers import SILICONE_MEASURES, silicone_check
 from palpation.report.records import FIX, record_csv as _csv
-from palpation.report.transfer_numbers import transfer_choice
+from palpation.report.transfer_numbers import TRANSFER_KEYS
 from palpation.report.twin_numbers import (
     binding_offset, stable_dt, stable_dt_table, uniaxial_table, verification,
 )
@@ -294,10 +294,7 @@ NUMBERS: dict[str, Callable[[Path], str]] = {
     "loop.heldout": lambda r: loop_change(r, "mae_heldout_px", "px", 2),
     "twin_choice": twin_choice,
     "twin_ablation": twin_ablation,
-    "transfer.silicone": lambda r: transfer_choice(r, "A-to-B"),
-    "transfer.meat": lambda r: transfer_choice(r, "A-to-C"),
-    "transfer.silicone_transductive": lambda r: transfer_choice(r, "A-to-B", transductive=True),
-    "transfer.meat_transductive": lambda r: transfer_choice(r, "A-to-C", transductive=True),
+    **TRANSFER_KEYS,
     "wall.quick": lambda r: last_wall_time(r, "quick"),
     "wall.paper": lambda r: last_wall_time(r, "paper"),
     "twin.streamed": lambda r: twin_batch_time(r, "streamed"),
@@ -337,10 +334,7 @@ NUMBERS: dict[str, Callable[[Path], str]] = {
     **{f"loop.general.prev_test{k}": v for k, v in general_split("loop_selftest_general_seed1002",
                                                                   "loop_selftest_general_seed1002_test.log",
                                                                   ("layered",)).items()},
-    "loop.general.attribution": lambda r: dev_choice(r, "loop_dev_attribution.json"),
-    "loop.general.verdict": lambda r: verdict_rescore(r, "loop_verdict_rescore_dev.csv"),
-    "loop.general.null_escape": lambda r: dev_choice(r, "loop_dev_null_escape.json"),
-    "loop.general.strength_floor": lambda r: strength_floor(r, "loop_strength_floor_dev.csv"),
+    **LOOP_DEV_KEYS,
     "loop.bench.quick": lambda r: bench_loop(r, "bench_loop_quick_cpu.json"),
     "loop.bench.paper": lambda r: bench_loop(r, "bench_loop_paper_gpu.json"),
     "loop.paper.effects": lambda r: loop_effects(r, "paper/loop_method/loop_real.csv"),

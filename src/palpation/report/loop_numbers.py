@@ -283,3 +283,21 @@ def strength_floor(results: Path, name: str, floor: float = 0.1) -> str:
     return (f"of {len(true)} injected effects named, the smallest fitted at {true['strength_fitted'].min():.2f} "
             f"steps, {harm or 'none'} below the floor; of {len(spurious)} spurious ones, "
             f"{int((spurious['strength_fitted'] < floor).sum())} taken out, over {table['record'].nunique()} records")
+
+
+def shell_vs_e(results: Path, name: str) -> str:
+    """The thick shell's signature outside E's, on the quick fit states and with the slide
+    (workflow/scripts/loop_shell_separation.py)."""
+    sets = json.loads(read_text(results / name, FIX, "record"))["sets"]
+    share = {k: v["columns"]["layered.shell_ratio"]["outside_E"] for k, v in sets.items()}
+    fit, slide = share["quick fit states (press, twist_z, twist_x)"], share["quick fit states + slide"]
+    return f"{100 * fit:.1f} % of its column lies outside E's on the fitted states, {100 * slide:.1f} % with the slide"
+
+
+LOOP_DEV_KEYS = {  # docs/loop.md: what the dev measurements chose or showed (records of dev seeds only)
+    "loop.general.attribution": lambda r: dev_choice(r, "loop_dev_attribution.json"),
+    "loop.general.verdict": lambda r: verdict_rescore(r, "loop_verdict_rescore_dev.csv"),
+    "loop.general.null_escape": lambda r: dev_choice(r, "loop_dev_null_escape.json"),
+    "loop.general.strength_floor": lambda r: strength_floor(r, "loop_strength_floor_dev.csv"),
+    "loop.shell_vs_e": lambda r: shell_vs_e(r, "loop_shell_separation_dev.json"),
+}

@@ -22,3 +22,11 @@ def transfer_choice(results: Path, config: str, transductive: bool = False) -> s
     if p["method"] == "reference":  # the paper's recipe itself: no alternative ranked above it
         return f"`reference` (the paper's recipe) AP {p['ap_mean']:.4f} ± {p['ap_std']:.4f}"
     return f"`{p['method']}` AP {p['ap_mean']:.4f} ± {p['ap_std']:.4f} (reference recipe {ref.iloc[0]['ap_mean']:.4f})"
+
+
+TRANSFER_KEYS = {  # the cross_real rule's choice per Sim-trained configuration, inductive and transductive
+    "transfer.silicone": lambda r: transfer_choice(r, "A-to-B"),
+    "transfer.meat": lambda r: transfer_choice(r, "A-to-C"),
+    "transfer.silicone_transductive": lambda r: transfer_choice(r, "A-to-B", transductive=True),
+    "transfer.meat_transductive": lambda r: transfer_choice(r, "A-to-C", transductive=True),
+}
