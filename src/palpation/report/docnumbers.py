@@ -15,9 +15,9 @@ from palpation.readers import read_json
 from palpation.report import paper
 from palpation.report.loop_numbers import (
     LOOP_DEV_KEYS, bench_loop, fixed_exact_share, fixed_inlist_unexplained, fixed_summary, general_below_power,
-    general_by_effect, general_exact_of, general_oracle, general_shared, general_soft_e, general_split,
-    general_summary, loop_change, loop_effects, loop_last, loop_rest_ratio, loop_same_table, loop_target,
-    reduced_converged, reduced_mae_after, reduced_run_after, selftest_runs,
+    general_brief, general_by_effect, general_exact_of, general_oracle, general_shared, general_soft_e,
+    general_split, general_summary, loop_change, loop_effects, loop_last, loop_rest_ratio, loop_same_table,
+    loop_target, reduced_converged, reduced_mae_after, reduced_run_after, selftest_runs,
 )
 from palpation.report.maps_numbers import SILICONE_MEASURES, silicone_check
 from palpation.report.records import FIX, record_csv as _csv
@@ -329,6 +329,7 @@ NUMBERS: dict[str, Callable[[Path], str]] = {
     "loop.general.paper_exact": lambda r: general_exact_of(r, "loop_selftest_general_dev_paper_partial.csv"),
     "loop.general.dev1": lambda r: general_summary(r, "loop_selftest_general_dev1_method.csv"),
     "loop.general.dev1_oracle": lambda r: general_oracle(r, "loop_selftest_general_dev1_method.md"),
+    "loop.general.test_brief": lambda r: general_brief(r, "loop_selftest_general.csv"),
     **{f"loop.general.test{k}": v for k, v in general_split("loop_selftest_general",
                                                              "loop_selftest_general_test.log").items()},
     **{f"loop.general.prev_test{k}": v for k, v in general_split("loop_selftest_general_seed1002",

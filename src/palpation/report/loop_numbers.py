@@ -166,6 +166,14 @@ def general_summary(results: Path, name: str) -> str:
             f"{sum(three)} of {len(three)}), MAE cut {_pct(_share(cut))}, {verdict}; {outside}")
 
 
+def general_brief(results: Path, name: str) -> str:
+    """The README's line on a generative test record: the exact in-list set and the outside effects flagged."""
+    runs = selftest_runs(results, name)
+    inl, out = [r for r in runs if not r["unlisted"]], [r for r in runs if r["unlisted"]]
+    return (f"names the exact effect set in {_pct(_share(general_exact(runs)))} of {len(inl)} in-list runs and calls "
+            f"{_pct(_share([r['unexplained'] for r in out]))} of {len(out)} outside effects `unexplained`")
+
+
 def general_exact_of(results: Path, name: str) -> str:
     exact = general_exact(selftest_runs(results, name))
     return f"{_pct(_share(exact))} of {len(exact)}"
