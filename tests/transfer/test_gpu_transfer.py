@@ -154,3 +154,31 @@ def test_the_committed_table_is_the_paper_record_and_has_the_issue_shape():
     groups = {(r["config"], r["selection"], r["transductive"]) for r in rows}
     for g in groups:
         assert sum(r["chosen"] == "true" for r in rows if (r["config"], r["selection"], r["transductive"]) == g) == 1
+
+
+def test_check_data_loads_the_named_sets_and_refuses_a_meat_set_without_its_layout(train_sets, tmp_path):
+    def check(extra):
+        return subprocess.run([sys.executable, str(SCRIPTS / "transfer_commands.py"), "--check-data", "--extra",
+                               extra], capture_output=True, text=True, cwd=REPO_ROOT,
+                              env={**os.environ, "PYTHONPATH": str(REPO_ROOT / "src")})
+    good = check(" ".join(f"data.{k}={v}" for k, v in train_sets.items()))
+    assert good.returncode == 0 and good.stdout == "", good.stderr
+    alone = tmp_path / "meat.npz"  # the set copied without the layout JSON beside it
+    alone.write_bytes(open(train_sets["meat"], "rb").read())
+    bad = check(f"data.meat={alone}")
+    assert bad.returncode == 1 and "Meat layout" in bad.stderr and bad.stderr.count("\n") == 1
+    unknown = check("data.pork=x.npz")
+    assert unknown.returncode == 1 and "data.pork" in unknown.stderr
+
+
+def test_a_failed_training_shows_its_own_error_line(tmp_path):
+    methods = tmp_path / "methods.yaml"
+    methods.write_text("methods:\n  broken:\n    about: a training that fails at start\n    transductive: false\n"
+                       "    overrides: [recipe=no_such_recipe]\n")
+    env = {**os.environ, "RUNS": str(tmp_path / "runs"), "METHODS": str(methods), "SEEDS": "0", "JOBS": "1",
+           "DEVICE": "cpu", "PYTHON": sys.executable, "CORES": "1", "PYTHONPATH": str(REPO_ROOT / "src")}
+    done = subprocess.run(["bash", str(SCRIPTS / "gpu_transfer.sh"), str(tmp_path / "out")], capture_output=True,
+                          text=True, cwd=REPO_ROOT, env=env, timeout=600)
+    assert done.returncode == 1
+    errors = [line for line in done.stdout.splitlines() if line.startswith("Error: broken_")]
+    assert errors and "no_such_recipe" in errors[0], done.stdout

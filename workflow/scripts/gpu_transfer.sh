@@ -40,7 +40,10 @@ if [ "${2:-}" = --inner ]; then  # the detached run itself
       while [ "$(jobs -rp | wc -l)" -ge "$jobs_n" ]; do wait -n; done
       k=$((k + 1))
       ( t0=$(date +%s); bash -c "$cmd" < /dev/null; rc=$?
-        echo "[$stage $k/$n] rc=$rc done in $(( $(date +%s) - t0 )) s: ${cmd%% > *}" | cut -c1-400 ) &
+        echo "[$stage $k/$n] rc=$rc done in $(( $(date +%s) - t0 )) s: ${cmd%% > *}" | cut -c1-400
+        log=${cmd##* > }; log=${log%% 2>&1}  # a failed training's own error line (the app's, Hydra's, Python's)
+        [ "$rc" -eq 0 ] || echo "Error: ${log##*/}: $(grep -E "[Ee]rror|Could not" "$log" 2>/dev/null |
+          grep -v HYDRA_FULL_ERROR | tail -1 | cut -c1-300)" ) &
     done < "$out/$stage.cmds"
     wait
     left=$(commands "$stage" | wc -l)
@@ -54,6 +57,7 @@ fi
 mkdir -p "$out"
 out=$(cd "$out" && pwd)
 commands teachers > /dev/null || exit 2  # a bad methods file fails here, before anything starts
+"$python" "$here/transfer_commands.py" --methods "$methods" --extra "${EXTRA:-}" --check-data || exit 2  # and bad data
 if ! device_attach "$out" transfer; then
   device_start "$out" transfer bash "${BASH_SOURCE[0]}" "$out" --inner
 fi

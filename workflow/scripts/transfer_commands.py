@@ -8,7 +8,9 @@ as A-to-C (also_test), and C-to-B; a method that chooses its checkpoint on the o
 process. A method `scored_with` another (an alignment of the scored clips only) has no training of its own: the
 other's training scores it too (also_aligned), so both hold the same models. Stage `teachers`: the methods without recipe.pseudo_from; `students`: those with it (their teachers'
 scores must exist first). --pending leaves out a training whose every output folder holds every seed's
-metrics.json (a cut training is listed again, whole).
+metrics.json (a cut training is listed again, whole). --check-data loads every data set that --extra names
+(`data.sim=`, `data.silicone=`, `data.meat=`) with the train app's own readers and prints nothing: a missing or
+broken file (a Meat set without its layout JSON beside it) fails here in one line, before any training starts.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from palpation.graph.sources import load_dataset
 from palpation.model.domain import other_real_set, partner_name
 from palpation.readers import one_line
 from palpation.report.runs import run_dir
@@ -85,6 +88,17 @@ def finished(root: str, methods: dict, method: str, scored: list[str], seeds: li
                for m in [method, *scored_with(methods, method, scored)] for c in scored for s in seeds)
 
 
+def check_data(extra: list[str]) -> None:
+    """Load each `data.<set>=<path>` of `extra` as a training would (the Sim set's train split, a real set whole)."""
+    for item in extra:
+        key, _, path = item.partition("=")
+        if key.startswith("data."):
+            name = key[len("data."):]
+            if name not in TEST_SETS.values() and name != "sim":
+                raise ValueError(f"--extra {item}: unknown data set '{name}' (use data.sim, data.silicone, data.meat)")
+            load_dataset(name, path, "train" if name == "sim" else "test")
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--methods", default="conf/transfer/methods.yaml")
@@ -97,11 +111,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--pending", action="store_true", help="leave out trainings whose runs all exist")
     p.add_argument("--logs", help="a folder: each command's output goes to <logs>/<method>_<config>.log")
     p.add_argument("--extra", default="", help="overrides added to every command (one shell-quoted string)")
+    p.add_argument("--check-data", action="store_true", help="load the data sets --extra names; print no command")
     a = p.parse_args(argv)
     try:
         methods = read_methods(a.methods)
         if len(set(a.seeds)) != len(a.seeds) or a.clip_len < 1:
             raise ValueError(f"--seeds {a.seeds} must be distinct and --clip-len {a.clip_len} >= 1")
+        if a.check_data:
+            check_data(shlex.split(a.extra))
+            return 0
     except (ValueError, OSError) as exc:
         print(f"transfer_commands: {one_line(exc)}", file=sys.stderr)
         return 1
