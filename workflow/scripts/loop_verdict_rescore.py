@@ -69,7 +69,7 @@ def main(runs_dir: Path, out_csv: Path, overrides: list[str]) -> None:
     for rec, p in zip(records, problems):
         m = loop.method
         checks = {b: final_check(p, sigs[p.name], conds[p.name], refits[p.name], p.refit, sigmas[p.name],
-                                 m.unexplained_alpha, m.unexplained_ratio, b)["test"] for b in ("twin", "candidates")}
+                                 m.unexplained_alpha, m.verdict_ratio, b)["test"] for b in ("twin", "candidates")}
         rows.append({"run": rec["run"], "seed": rec["seed"], "unlisted": "+".join(rec["unlisted"]),
                      "injected": "+".join(rec["injected_effects"]), "named": "+".join(rec["named"]),
                      "exact": set(rec["named"]) == set(rec["injected_effects"]),

@@ -184,7 +184,7 @@ def run_self(cfg, loop: LoopConfig, tw, mset, source, sim, tkey, out: Path, star
         save_text(out / "loop_selftest.csv", rows_csv(rows))
         meta = {"low": st.strength_low, "high": st.strength_high, "noise_px": st.noise_px, "states": st.states,
                 "holdout": st.holdout, "base_effects": st.base_effects, "runs_per_case": st.runs_per_case,
-                "max_rounds": st.max_rounds, "ratio": loop.method.unexplained_ratio, "alpha": loop.method.unexplained_alpha}
+                "max_rounds": st.max_rounds, "ratio": loop.method.verdict_ratio, "alpha": loop.method.unexplained_alpha}
         save_text(out / "selftest.md", report.selftest_markdown(rows, table, summ, meta))
         save_json(out / "selftest.json", {"rows": rows, "confusion": table, "summary": summ})
         for r in rows:

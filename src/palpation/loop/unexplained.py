@@ -212,6 +212,6 @@ def check_all(problems: list, simulate, cfg, sigmas: Mapping[str, float]) -> Non
     for p in problems:
         s = p.last_signatures
         p.final = final_check(p, s["sigs"], s["cond"], s["refit"], s["refit_dofs"], sigmas[p.name],
-                              cfg.method.unexplained_alpha, cfg.method.unexplained_ratio, cfg.method.unexplained_beyond)
+                              cfg.method.unexplained_alpha, cfg.method.verdict_ratio, cfg.method.unexplained_beyond)
         if p.name in polished:
             p.final["refit"] = polished[p.name]

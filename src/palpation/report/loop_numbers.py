@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Callable
 
 from palpation.readers import read_text
+from palpation.report.compare import truthy
 from palpation.report.records import FIX, record_csv as _csv
 
 
@@ -293,6 +294,17 @@ def strength_floor(results: Path, name: str, floor: float = 0.1) -> str:
             f"{int((spurious['strength_fitted'] < floor).sum())} taken out, over {table['record'].nunique()} records")
 
 
+def verdict_ratio(results: Path, name: str) -> str:
+    """The verdict's ratio chosen on the dev records, against the earlier 2 (workflow/scripts/loop_verdict_ratio.py)."""
+    t = _csv(results, name, ("ratio", "exact_runs", "exact_flagged", "outside_runs", "outside_flagged",
+                             "inexact_runs", "inexact_flagged", "chosen")).set_index("ratio")
+    c, old = t[t["chosen"].map(truthy)].iloc[0], t.loc[2.0]
+    return (f"{c.name:g} chosen; against 2, runs with the exact set flagged {old['exact_flagged']} → "
+            f"{c['exact_flagged']} of {c['exact_runs']}, outside runs {old['outside_flagged']} → {c['outside_flagged']} "
+            f"of {c['outside_runs']}, other in-list runs {old['inexact_flagged']} → {c['inexact_flagged']} of "
+            f"{c['inexact_runs']}")
+
+
 def shell_vs_e(results: Path, name: str) -> str:
     """The thick shell's signature outside E's, on the quick fit states and with the slide
     (workflow/scripts/loop_shell_separation.py)."""
@@ -308,4 +320,5 @@ LOOP_DEV_KEYS = {  # docs/loop.md: what the dev measurements chose or showed (re
     "loop.general.null_escape": lambda r: dev_choice(r, "loop_dev_null_escape.json"),
     "loop.general.strength_floor": lambda r: strength_floor(r, "loop_strength_floor_dev.csv"),
     "loop.shell_vs_e": lambda r: shell_vs_e(r, "loop_shell_separation_dev.json"),
+    "loop.general.verdict_ratio": lambda r: verdict_ratio(r, "loop_verdict_ratio_dev.csv"),
 }
