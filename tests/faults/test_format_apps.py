@@ -4,6 +4,7 @@ and Sim manifests, photos, videos and checkpoints end as the app's one-line erro
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -163,6 +164,19 @@ def test_vessel_maps_app_truncated_checkpoint(tmp_path, fault):
     with fault(SystemExit, "vessel_maps: error:", f"checkpoint {run / 'checkpoint.pt'}", "damaged or truncated",
                "rerun its train rule"):
         run_app("vessel_maps", cfg)
+
+
+def test_train_data_meat_set_without_its_layout(tmp_path, fault):
+    """a Meat set's .npz copied without the layout JSON beside it (its trials and splits)"""
+    from palpation.graph.sources import load_meat
+    from palpation.graph.synthetic import write_meat
+
+    made = write_meat(tmp_path / "made" / "meat.npz", rest_layout("ideal"), n_frames=(9,) * 3, n_val=1)
+    alone = tmp_path / "copied" / "meat.npz"
+    alone.parent.mkdir()
+    alone.write_bytes(Path(made).read_bytes())
+    with fault(FileNotFoundError, "Meat layout", str(alone.with_suffix(".json")), "rerun the meat_set rule"):
+        load_meat(alone, "all")
 
 
 def test_train_data_sim_trajectory_of_wrong_shape(tmp_path, fault):
