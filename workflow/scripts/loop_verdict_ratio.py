@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from palpation.report.loop_numbers import selftest_runs
+from palpation.report.loop_numbers import general_exact, selftest_runs
 
 GRID = (1.25, 1.5, 1.75, 2.0)
 MARGIN = 1.15  # above the null's largest value: a few dev records do not show the tail
@@ -42,8 +42,10 @@ def runs_of(paths: list[Path]) -> list[dict]:
 
 
 def table(runs: list[dict]) -> pd.DataFrame:
-    exact = [r for r in runs if not r["unlisted"] and r["named"] == r["injected"]]
-    inexact = [r for r in runs if not r["unlisted"] and r["named"] != r["injected"]]
+    in_list = [r for r in runs if not r["unlisted"]]  # general_exact's flags follow these runs' order
+    flags = general_exact(runs)
+    exact = [r for r, f in zip(in_list, flags) if f]
+    inexact = [r for r, f in zip(in_list, flags) if not f]
     outside = [r for r in runs if r["unlisted"]]
     floor = MARGIN * max(r["excess_ratio"] for r in exact)
     chosen = min((g for g in GRID if g >= floor), default=max(GRID))

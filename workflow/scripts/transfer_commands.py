@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 
 from palpation.graph.sources import load_dataset
+from palpation.model.config import DATASETS
 from palpation.model.domain import other_real_set, partner_name
 from palpation.readers import one_line
 from palpation.report.runs import run_dir
@@ -94,7 +95,7 @@ def check_data(extra: list[str]) -> None:
         key, _, path = item.partition("=")
         if key.startswith("data."):
             name = key[len("data."):]
-            if name not in TEST_SETS.values() and name != "sim":
+            if name not in DATASETS:
                 raise ValueError(f"--extra {item}: unknown data set '{name}' (use data.sim, data.silicone, data.meat)")
             load_dataset(name, path, "train" if name == "sim" else "test")
 
